@@ -1,0 +1,316 @@
+//! Every tunable of the pipeline, with the paper's Table I defaults.
+//!
+//! Pixel-valued parameters in the paper (θ_A^L, θ_A^U, M) refer to
+//! 2048 × 2048 Cam-trawl frames. [`Params::for_frame`] scales them to other
+//! frame sizes: areas by `(w / 2048)²`, lengths by `w / 2048` (w = frame
+//! width), so a 512-pixel test haul keeps the same physical meaning.
+//! Structuring-element sizes (7 px) are kept at the paper's values; they are
+//! scaled too, to the nearest odd size ≥ 3, only below 1024-pixel frames.
+
+use crate::error::ParamError;
+
+/// Frame width the paper's pixel-valued parameters refer to.
+pub const PAPER_FRAME_WIDTH: u32 = 2048;
+
+/// Data-association method (paper Table V).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[serde(rename_all = "lowercase")]
+pub enum Tracker {
+    /// Matching cost + multi-target Viterbi data association (Section IV.C).
+    #[default]
+    Viterbi,
+    /// Matching cost alone, greedy frame-to-frame (the paper's "MC").
+    Mc,
+    /// Nearest neighbour on predicted position (the paper's "NN").
+    Nn,
+}
+
+/// All parameters of the pipeline. Field names are the keys of a
+/// `--params` TOML file.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    // --- Automatic fish segmentation (Section III, Table I) ---
+    /// p_low — shifting factor of the low threshold, eq. (1). Table I: 1.
+    pub p_low: f32,
+    /// p_high — shifting factor of the high threshold, eq. (1). Table I: 0.7.
+    pub p_high: f32,
+    /// θ_bp — threshold of the backprojected ratio histogram, eq. (3). Table I: 0.3.
+    pub theta_bp: f32,
+    /// θ_A^L — lower limit of object area in pixels, eq. (4). Table I: 2·10³ (2048² frame).
+    pub area_min: u32,
+    /// θ_A^U — upper limit of object area in pixels, eq. (4). Table I: 10⁶ (2048² frame).
+    pub area_max: u32,
+    /// θ_V — lower limit of an object's grey-level variance, eq. (6). Table I: 30.
+    pub var_min: f32,
+    /// Number of grey-level histogram bins for backprojection and EMD
+    /// (Section III.B, VI.A: 16 is best).
+    pub hist_bins: u8,
+    /// Length of the diagonal line elements for trawl-mesh removal (Section V.A: 7).
+    pub mesh_line_len: u8,
+    /// Size of the disk structuring element (Section V.A: 7 × 7).
+    pub disk_size: u8,
+    /// Enlargement of the inscribed ellipse for the local region (Section III.A: 1.5).
+    pub ellipse_scale: f32,
+    /// Ablation switch: use both thresholds of eq. (1) (false: Otsu's τ alone).
+    pub double_threshold: bool,
+    /// Ablation switch: merge the two masks by histogram backprojection, eq. (2)–(3)
+    /// (false: use M_high alone).
+    pub backprojection: bool,
+    /// Ablation switch: reject objects by variance, eq. (5)–(6).
+    pub variance_rejection: bool,
+
+    // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
+    /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
+    pub v_ref_x: f32,
+    /// v_ref y component.
+    pub v_ref_y: f32,
+    /// α — update rate of the target velocity, eq. (14). Table I: 0.3.
+    pub alpha: f32,
+    /// M — margin from the frame border for target entrance/exit, pixels. Table I: 100 (2048² frame).
+    pub margin: u32,
+    /// Data-association method.
+    pub tracker: Tracker,
+
+    // --- Fish length measurement (Section IV.D, Table I) ---
+    /// θ_SAD — threshold of the SAD ratio for body-end mismatch, eq. (15). Table I: 16.
+    pub theta_sad: f32,
+    /// r — search range of the disparity refinement, pixels. Table I: 16.
+    pub refine_range: u32,
+    /// Block size of the dense disparity refinement (Section V.D: 8 × 8).
+    pub refine_block: u8,
+    /// Ablation switch: fish-tail end compensation (Section IV.D.1).
+    pub tail_compensation: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            p_low: 1.0,
+            p_high: 0.7,
+            theta_bp: 0.3,
+            area_min: 2_000,
+            area_max: 1_000_000,
+            var_min: 30.0,
+            hist_bins: 16,
+            mesh_line_len: 7,
+            disk_size: 7,
+            ellipse_scale: 1.5,
+            double_threshold: true,
+            backprojection: true,
+            variance_rejection: true,
+            v_ref_x: -1.0,
+            v_ref_y: 0.0,
+            alpha: 0.3,
+            margin: 100,
+            tracker: Tracker::Viterbi,
+            theta_sad: 16.0,
+            refine_range: 16,
+            refine_block: 8,
+            tail_compensation: true,
+        }
+    }
+}
+
+/// Nearest odd integer ≥ 3 to `v`.
+fn odd_at_least_3(v: f32) -> u8 {
+    let r = micromath::F32(v).round().0;
+    let mut n = if r < 3.0 {
+        3
+    } else if r > 255.0 {
+        255
+    } else {
+        r as u32
+    };
+    if n % 2 == 0 {
+        n += 1;
+    }
+    n.min(255) as u8
+}
+
+impl Params {
+    /// The Table I defaults scaled to a `width`-pixel-wide frame (see the
+    /// module documentation for the rule).
+    pub fn for_frame(width: u32) -> Params {
+        Params::default().scaled_to(width)
+    }
+
+    /// These parameters, assumed to be given for a 2048-wide frame, scaled
+    /// to a `width`-pixel-wide frame.
+    pub fn scaled_to(mut self, width: u32) -> Params {
+        if width == 0 || width == PAPER_FRAME_WIDTH {
+            return self;
+        }
+        let s = width as f32 / PAPER_FRAME_WIDTH as f32;
+        let s2 = s * s;
+        self.area_min = ((self.area_min as f32 * s2) as u32).max(1);
+        self.area_max = ((self.area_max as f32 * s2) as u32).max(self.area_min);
+        self.margin = ((self.margin as f32 * s) as u32).max(1);
+        if width < 1024 {
+            self.mesh_line_len = odd_at_least_3(self.mesh_line_len as f32 * s * 2.0);
+            self.disk_size = odd_at_least_3(self.disk_size as f32 * s * 2.0);
+        }
+        self
+    }
+
+    /// Checks every value against its allowed range; the error names the key.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        fn finite(name: &'static str, v: f32) -> Result<(), ParamError> {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(ParamError::NotFinite(name))
+            }
+        }
+        fn range(name: &'static str, ok: bool, allowed: &'static str) -> Result<(), ParamError> {
+            if ok {
+                Ok(())
+            } else {
+                Err(ParamError::OutOfRange { name, allowed })
+            }
+        }
+        for (n, v) in [
+            ("p_low", self.p_low),
+            ("p_high", self.p_high),
+            ("theta_bp", self.theta_bp),
+            ("var_min", self.var_min),
+            ("ellipse_scale", self.ellipse_scale),
+            ("v_ref_x", self.v_ref_x),
+            ("v_ref_y", self.v_ref_y),
+            ("alpha", self.alpha),
+            ("theta_sad", self.theta_sad),
+        ] {
+            finite(n, v)?;
+        }
+        range("p_low", (0.0..=1.0).contains(&self.p_low), "0 ≤ p_low ≤ 1")?;
+        range(
+            "p_high",
+            (0.0..=1.0).contains(&self.p_high),
+            "0 ≤ p_high ≤ 1",
+        )?;
+        if self.p_high > self.p_low {
+            return Err(ParamError::Inconsistent {
+                name: "p_high",
+                why: "p_high must not exceed p_low (τ_high ≥ τ_low)",
+            });
+        }
+        range(
+            "theta_bp",
+            (0.0..1.0).contains(&self.theta_bp),
+            "0 ≤ theta_bp < 1",
+        )?;
+        range("area_min", self.area_min >= 1, "area_min ≥ 1")?;
+        if self.area_max < self.area_min {
+            return Err(ParamError::Inconsistent {
+                name: "area_max",
+                why: "area_max must be ≥ area_min",
+            });
+        }
+        range("var_min", self.var_min >= 0.0, "var_min ≥ 0")?;
+        range(
+            "hist_bins",
+            matches!(self.hist_bins, 2 | 4 | 8 | 16 | 32 | 64 | 128),
+            "a power of two, 2 to 128",
+        )?;
+        range(
+            "mesh_line_len",
+            self.mesh_line_len % 2 == 1 && (1..=31).contains(&self.mesh_line_len),
+            "odd, 1 to 31",
+        )?;
+        range(
+            "disk_size",
+            self.disk_size % 2 == 1 && (1..=31).contains(&self.disk_size),
+            "odd, 1 to 31",
+        )?;
+        range(
+            "ellipse_scale",
+            (1.0..=4.0).contains(&self.ellipse_scale),
+            "1 ≤ ellipse_scale ≤ 4",
+        )?;
+        let vr = self.v_ref_x * self.v_ref_x + self.v_ref_y * self.v_ref_y;
+        range("v_ref_x", vr > 1e-12, "v_ref must not be the zero vector")?;
+        range("alpha", (0.0..=1.0).contains(&self.alpha), "0 ≤ alpha ≤ 1")?;
+        range("margin", self.margin <= 4096, "0 ≤ margin ≤ 4096")?;
+        range("theta_sad", self.theta_sad > 0.0, "theta_sad > 0")?;
+        range(
+            "refine_range",
+            (1..=256).contains(&self.refine_range),
+            "1 ≤ refine_range ≤ 256",
+        )?;
+        range(
+            "refine_block",
+            (2..=32).contains(&self.refine_block),
+            "2 ≤ refine_block ≤ 32",
+        )?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_table_one_and_valid() {
+        let p = Params::default();
+        assert_eq!((p.p_low, p.p_high, p.theta_bp), (1.0, 0.7, 0.3));
+        assert_eq!(
+            (p.area_min, p.area_max, p.var_min),
+            (2_000, 1_000_000, 30.0)
+        );
+        assert_eq!(
+            (p.v_ref_x, p.v_ref_y, p.alpha, p.margin),
+            (-1.0, 0.0, 0.3, 100)
+        );
+        assert_eq!((p.theta_sad, p.refine_range), (16.0, 16));
+        assert_eq!(p.validate(), Ok(()));
+    }
+
+    #[test]
+    fn scaling_follows_frame_size() {
+        let p = Params::for_frame(1024);
+        assert_eq!(p.area_min, 500);
+        assert_eq!(p.margin, 50);
+        assert_eq!(p.disk_size, 7);
+        let q = Params::for_frame(512);
+        assert_eq!(q.area_min, 125);
+        assert_eq!(q.margin, 25);
+        assert_eq!(q.disk_size, 5); // 7 · (512/1024) = 3.5 → 4 → next odd 5
+        assert_eq!(q.validate(), Ok(()));
+        assert_eq!(Params::for_frame(2048), Params::default());
+    }
+
+    #[test]
+    fn validate_names_the_key() {
+        let mut p = Params {
+            alpha: 1.5,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "alpha");
+        p.alpha = f32::NAN;
+        assert_eq!(p.validate().unwrap_err(), ParamError::NotFinite("alpha"));
+        let p = Params {
+            p_high: 1.0,
+            p_low: 0.5,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "p_high");
+        let p = Params {
+            hist_bins: 12,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "hist_bins");
+        let p = Params {
+            area_max: 10,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "area_max");
+        let p = Params {
+            disk_size: 6,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "disk_size");
+    }
+}

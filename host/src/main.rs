@@ -1,0 +1,125 @@
+//! `fishtrack`: count, track and measure fish in Cam-trawl stereo hauls.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use fishtrack::error::exit_code;
+
+#[derive(Parser)]
+#[command(
+    name = "fishtrack",
+    version,
+    about = "Count, track and measure live fish in Cam-trawl stereo hauls"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Synthesise a haul with ground truth, track it, score it, print a summary.
+    Demo {
+        /// Where to write the haul and the results (default: a temporary folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Write a synthetic haul (left/, right/, calibration.yml) and its truth.json.
+    Synth {
+        /// Output haul directory.
+        dir: PathBuf,
+        /// Number of stereo frame pairs.
+        #[arg(long, default_value_t = 30)]
+        frames: u32,
+        /// Random seed (same seed, same bytes).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Frame width and height in pixels.
+        #[arg(long, default_value_t = 2048)]
+        size: u32,
+        /// Mean number of fish entering the view per frame.
+        #[arg(long, default_value_t = 1.0)]
+        fish_rate: f64,
+    },
+    /// Track fish in a haul and write tracks, fish, detections and summary.
+    Track {
+        /// Haul directory.
+        haul: PathBuf,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// TOML file overriding Table I parameters.
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Also write overlays and the length-frequency plot.
+        #[arg(long)]
+        overlays: bool,
+        /// Data association: viterbi, mc or nn.
+        #[arg(long, default_value = "viterbi")]
+        tracker: String,
+    },
+    /// Score a tracker output directory against HAUL/truth.json.
+    Eval {
+        /// Haul directory with truth.json.
+        haul: PathBuf,
+        /// Tracker output directory.
+        out: PathBuf,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Compare the no-heap core with the float reference on a haul.
+    Compare {
+        /// Haul directory.
+        haul: PathBuf,
+    },
+    /// Per-stage timing, pairs per second and memory on a haul.
+    Bench {
+        /// Haul directory.
+        haul: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Strobe/camera timing bench check over a serial line.
+    TimingCheck {
+        /// Serial port path.
+        #[arg(long)]
+        port: PathBuf,
+        /// Frames to run.
+        #[arg(long, default_value_t = 25)]
+        frames: u32,
+    },
+}
+
+fn not_built(name: &str) -> anyhow::Result<()> {
+    Err(anyhow::Error::new(fishtrack::InputError::plain(
+        format!("fishtrack {name}"),
+        "this subcommand is not built yet",
+    )))
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Demo { .. } => not_built("demo"),
+        Command::Synth { .. } => not_built("synth"),
+        Command::Track { .. } => not_built("track"),
+        Command::Eval { .. } => not_built("eval"),
+        Command::Compare { .. } => not_built("compare"),
+        Command::Bench { .. } => not_built("bench"),
+        Command::TimingCheck { .. } => not_built("timing-check"),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(exit_code(&e) as u8)
+        }
+    }
+}
