@@ -21,8 +21,10 @@
 
 pub mod error;
 pub mod image;
+pub mod object;
 pub mod params;
 
 pub use error::{ImageError, ParamError};
 pub use image::{ImageView, ImageViewMut, Roi};
+pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;
