@@ -21,8 +21,10 @@
 
 pub mod error;
 pub mod image;
+pub mod link;
 pub mod object;
 pub mod params;
+pub mod strobe;
 
 pub use error::{ImageError, ParamError};
 pub use image::{ImageView, ImageViewMut, Roi};
