@@ -109,7 +109,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval { .. } => not_built("eval"),
         Command::Compare { .. } => not_built("compare"),
         Command::Bench { .. } => not_built("bench"),
-        Command::TimingCheck { .. } => not_built("timing-check"),
+        Command::TimingCheck { port, frames } => fishtrack::timing::run(&port, frames),
     }
 }
 
