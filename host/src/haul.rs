@@ -527,6 +527,34 @@ mod tests {
             .unwrap_or(false)
     }
 
+    /// Runs a Python/OpenCV oracle script and returns its stdout; `None`
+    /// (skip) if python3 or cv2 is missing, unless FISHTRACK_REQUIRE_PYTHON=1.
+    fn python_cv2(script: &str, args: &[&Path]) -> Option<String> {
+        let probe = std::process::Command::new("python3")
+            .args(["-c", "import cv2, numpy"])
+            .output();
+        if !matches!(&probe, Ok(o) if o.status.success()) {
+            let why = format!("python3 with cv2/numpy unavailable: {probe:?}");
+            if std::env::var("FISHTRACK_REQUIRE_PYTHON").as_deref() == Ok("1") {
+                panic!("{why}");
+            }
+            eprintln!("SKIP (oracle): {why}");
+            return None;
+        }
+        let out = std::process::Command::new("python3")
+            .arg("-c")
+            .arg(script)
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "oracle script failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        Some(String::from_utf8(out.stdout).unwrap())
+    }
+
     #[test]
     fn pairs_are_numeric_ordered_and_one_based() {
         let t = haul_with(&["10.png", "2.png", "1.png", "000003.tif"], 8, 6);
@@ -788,28 +816,16 @@ mod tests {
         let gf = t.path().join("g16.png");
         g16.save(&gf).unwrap();
 
-        let script = "import sys, cv2\n\
-c = cv2.imread(sys.argv[1], cv2.IMREAD_COLOR)\n\
-print(' '.join(map(str, cv2.cvtColor(c, cv2.COLOR_BGR2GRAY).ravel())))\n\
-g = cv2.imread(sys.argv[2], cv2.IMREAD_UNCHANGED)\n\
-assert g.dtype.name == 'uint16', g.dtype\n\
-print(' '.join(map(str, (g >> 8).ravel())))\n";
-        let out = std::process::Command::new("python3")
-            .arg("-c")
-            .arg(script)
-            .arg(&cf)
-            .arg(&gf)
-            .output();
-        let out = match out {
-            Ok(o) if o.status.success() => String::from_utf8(o.stdout).unwrap(),
-            other => {
-                let why = format!("python3 with cv2 unavailable: {other:?}");
-                if std::env::var("FISHTRACK_REQUIRE_PYTHON").as_deref() == Ok("1") {
-                    panic!("{why}");
-                }
-                eprintln!("SKIP colour_and_16bit_match_opencv: {why}");
-                return;
-            }
+        let script = r#"
+import sys, cv2
+c = cv2.imread(sys.argv[1], cv2.IMREAD_COLOR)
+print(' '.join(map(str, cv2.cvtColor(c, cv2.COLOR_BGR2GRAY).ravel())))
+g = cv2.imread(sys.argv[2], cv2.IMREAD_UNCHANGED)
+assert g.dtype.name == 'uint16', g.dtype
+print(' '.join(map(str, (g >> 8).ravel())))
+"#;
+        let Some(out) = python_cv2(script, &[&cf, &gf]) else {
+            return;
         };
         let mut lines = out.lines();
         let parse = |l: Option<&str>| -> Vec<u8> {
@@ -850,6 +866,54 @@ print(' '.join(map(str, (g >> 8).ravel())))\n";
             .filter(|m| m.starts_with("WARN") && m.contains(&dir))
             .count();
         assert_eq!(n, 1, "one 16-bit warning per haul");
+    }
+
+    /// JPEGs written by OpenCV's libjpeg (baseline grey, baseline colour,
+    /// progressive colour) decode in strict mode, close to
+    /// `cv2.cvtColor(cv2.imread(f), COLOR_BGR2GRAY)`; truncated, they fail.
+    #[test]
+    fn opencv_jpegs_decode_strictly_and_match() {
+        let t = tempfile::tempdir().unwrap();
+        let script = r#"
+import sys, cv2, numpy as np
+y, x = np.mgrid[0:96, 0:128]
+g = ((x * x + 3 * y * y + x * y) % 256).astype(np.uint8)
+c = np.dstack([g, (x * 2) % 256, (y * 3) % 256]).astype(np.uint8)
+d = sys.argv[1]
+q = [cv2.IMWRITE_JPEG_QUALITY, 90]
+cv2.imwrite(d + '/g.jpg', g, q)
+cv2.imwrite(d + '/c.jpg', c, q)
+cv2.imwrite(d + '/p.jpg', c, q + [cv2.IMWRITE_JPEG_PROGRESSIVE, 1])
+for n in ['g', 'c', 'p']:
+    im = cv2.imread(d + '/' + n + '.jpg', cv2.IMREAD_UNCHANGED)
+    if im.ndim == 3:
+        im = cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)
+    print(' '.join(map(str, im.ravel())))
+"#;
+        let Some(out) = python_cv2(script, &[t.path()]) else {
+            return;
+        };
+        for (name, line) in ["g", "c", "p"].into_iter().zip(out.lines()) {
+            let cv: Vec<i32> = line.split(' ').map(|v| v.parse().unwrap()).collect();
+            let f = t.path().join(format!("{name}.jpg"));
+            let ours = load_gray(&f).unwrap();
+            assert_eq!(ours.dimensions(), (128, 96));
+            let d: Vec<i32> = ours
+                .as_raw()
+                .iter()
+                .zip(&cv)
+                .map(|(&a, &b)| (a as i32 - b).abs())
+                .collect();
+            let max = *d.iter().max().unwrap();
+            let mean = d.iter().sum::<i32>() as f64 / d.len() as f64;
+            eprintln!("{name}: max {max} mean {mean:.3}");
+            // IDCT/upsampling rounding differs by at most a grey level or two.
+            assert!(max <= 2 && mean < 0.1, "{name}.jpg: max {max} mean {mean}");
+            let b = std::fs::read(&f).unwrap();
+            std::fs::write(&f, &b[..b.len() * 3 / 4]).unwrap();
+            let e = err_of(load_gray(&f));
+            assert!(e.contains(&shown(&f)), "{e}");
+        }
     }
 
     #[test]
