@@ -7,6 +7,8 @@
 #![deny(missing_docs)]
 
 pub mod error;
+pub mod haul;
+pub mod params_file;
 pub mod timing;
 pub mod truth;
 
