@@ -288,7 +288,10 @@ impl Device {
                 }
                 Ok(None) => break,
                 Err(e) => {
-                    return vec![Report::Error(DeviceError::new(ErrorCode::Pin, &e.to_string()))];
+                    return vec![Report::Error(DeviceError::new(
+                        ErrorCode::Pin,
+                        &e.to_string(),
+                    ))];
                 }
             }
         }
@@ -405,12 +408,18 @@ mod tests {
         };
         assert!(matches!(
             d.handle(Command::Configure(bad))[..],
-            [Report::Error(DeviceError { code: ErrorCode::BadConfig, .. })]
+            [Report::Error(DeviceError {
+                code: ErrorCode::BadConfig,
+                ..
+            })]
         ));
         d.handle(Command::Start);
         assert!(matches!(
             d.handle(Command::RunBench { frames: 2 })[..],
-            [Report::Error(DeviceError { code: ErrorCode::Busy, .. })]
+            [Report::Error(DeviceError {
+                code: ErrorCode::Busy,
+                ..
+            })]
         ));
         d.step(|_| {});
         d.handle(Command::Stop);
@@ -442,8 +451,16 @@ mod tests {
         assert_eq!(
             frames,
             vec![
-                FrameReport { frame: 0, objects: 0, tracks: 0 },
-                FrameReport { frame: 1, objects: 0, tracks: 0 }
+                FrameReport {
+                    frame: 0,
+                    objects: 0,
+                    tracks: 0
+                },
+                FrameReport {
+                    frame: 1,
+                    objects: 0,
+                    tracks: 0
+                }
             ]
         );
         std::fs::remove_dir_all(&dir).unwrap();

@@ -98,7 +98,13 @@ pub struct CheckLine {
     pub note: String,
 }
 
-fn line(name: &'static str, measured: String, tolerance: String, pass: bool, note: String) -> CheckLine {
+fn line(
+    name: &'static str,
+    measured: String,
+    tolerance: String,
+    pass: bool,
+    note: String,
+) -> CheckLine {
     CheckLine {
         name,
         measured,
@@ -196,17 +202,29 @@ pub fn analyse(
     if dropped_trigger {
         note = format!("dropped trigger: {note}");
     }
-    out.push(line("missing edges", format!("{missing}"), "0".into(), missing == 0, note));
+    out.push(line(
+        "missing edges",
+        format!("{missing}"),
+        "0".into(),
+        missing == 0,
+        note,
+    ));
 
     // Period error and jitter, per camera.
-    let cams: [(&str, fn(&FrameEdges) -> Option<u64>); 2] =
-        [("L", |e| e.trigger_left_rise), ("R", |e| e.trigger_right_rise)];
+    type Rise = fn(&FrameEdges) -> Option<u64>;
+    let cams: [(&str, Rise); 2] = [
+        ("L", |e| e.trigger_left_rise),
+        ("R", |e| e.trigger_right_rise),
+    ];
     let mut period_err: Option<(f64, u32, &str)> = None;
     let mut jit_max: Option<(f64, u32, &str)> = None;
     let mut jit_sq = 0.0;
     let mut jit_n = 0usize;
     for (cam, rise) in cams {
-        let pts: Vec<(u32, u64)> = edges.iter().filter_map(|e| rise(e).map(|t| (e.frame, t))).collect();
+        let pts: Vec<(u32, u64)> = edges
+            .iter()
+            .filter_map(|e| rise(e).map(|t| (e.frame, t)))
+            .collect();
         for w in pts.windows(2) {
             let (f0, t0) = w[0];
             let (f1, t1) = w[1];
@@ -278,7 +296,12 @@ pub fn analyse(
     // Skew.
     let skew = edges
         .iter()
-        .filter_map(|e| Some((e.trigger_left_rise?.abs_diff(e.trigger_right_rise?), e.frame)))
+        .filter_map(|e| {
+            Some((
+                e.trigger_left_rise?.abs_diff(e.trigger_right_rise?),
+                e.frame,
+            ))
+        })
         .max();
     out.push(match skew {
         Some((s, f)) => line(
@@ -312,7 +335,10 @@ pub fn analyse(
         };
         let mut fs = i64::MAX;
         let mut fe = i64::MAX;
-        for rise in [e.trigger_left_rise, e.trigger_right_rise].into_iter().flatten() {
+        for rise in [e.trigger_left_rise, e.trigger_right_rise]
+            .into_iter()
+            .flatten()
+        {
             fs = fs.min(rise as i64 - on as i64);
             fe = fe.min(off as i64 - (rise + exposure) as i64);
         }
@@ -385,7 +411,11 @@ pub fn analyse(
 /// The table, one line per check.
 pub fn render(lines: &[CheckLine]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "{:<40} {:>16}  {:<11} {}", "check", "measured", "tolerance", "result");
+    let _ = writeln!(
+        s,
+        "{:<40} {:>16}  {:<11} result",
+        "check", "measured", "tolerance"
+    );
     for l in lines {
         let _ = write!(
             s,
@@ -464,7 +494,8 @@ impl Client {
                     self.pos = 0;
                     self.len = n;
                 }
-                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
+                }
                 Err(e) => bail!("{}: serial read failed: {e}", self.name),
             }
         }
@@ -484,11 +515,15 @@ impl Client {
 /// input is bad (exit 2).
 pub fn run(port: &Path, frames: u32) -> anyhow::Result<()> {
     if frames == 0 || frames > MAX_FRAMES {
-        return Err(InputError::plain("--frames", format!("must be 1..={MAX_FRAMES}, got {frames}")).into());
+        return Err(InputError::plain(
+            "--frames",
+            format!("must be 1..={MAX_FRAMES}, got {frames}"),
+        )
+        .into());
     }
     let config = StrobeConfig::default();
     let name = port.display().to_string();
-    let mut p = serialport::new(port.to_string_lossy(), 115_200)
+    let p = serialport::new(port.to_string_lossy(), 115_200)
         .timeout(Duration::from_millis(100))
         .open()
         .map_err(|e| InputError::file(port, format!("cannot open serial port: {e}")))?;
@@ -508,7 +543,12 @@ pub fn run(port: &Path, frames: u32) -> anyhow::Result<()> {
     c.send(&Command::Configure(config))?;
     let st = c.status("the configuration answer")?;
     if st.config != config {
-        bail!("{}: device kept timing {:?}, asked for {:?}", c.name, st.config, config);
+        bail!(
+            "{}: device kept timing {:?}, asked for {:?}",
+            c.name,
+            st.config,
+            config
+        );
     }
     c.send(&Command::RunBench { frames })?;
     let mut edges: Vec<FrameEdges> = Vec::new();
@@ -539,10 +579,18 @@ pub fn run(port: &Path, frames: u32) -> anyhow::Result<()> {
         println!("\nRESULT: PASS");
         Ok(())
     } else {
-        println!("\nRESULT: FAIL ({} of {} checks)", failed.len(), lines.len());
+        println!(
+            "\nRESULT: FAIL ({} of {} checks)",
+            failed.len(),
+            lines.len()
+        );
         let mut msg = String::from("timing check failed:");
         for l in failed {
-            let _ = write!(msg, "\n  {}: {} (tolerance {})", l.name, l.measured, l.tolerance);
+            let _ = write!(
+                msg,
+                "\n  {}: {} (tolerance {})",
+                l.name, l.measured, l.tolerance
+            );
             if !l.note.is_empty() {
                 let _ = write!(msg, " — {}", l.note);
             }
@@ -578,7 +626,13 @@ mod tests {
     }
 
     fn check(edges: &[FrameEdges], stats: LineStats) -> Vec<CheckLine> {
-        analyse(&StrobeConfig::default(), 4, edges, stats, &Tolerances::default())
+        analyse(
+            &StrobeConfig::default(),
+            4,
+            edges,
+            stats,
+            &Tolerances::default(),
+        )
     }
 
     fn get<'a>(lines: &'a [CheckLine], name: &str) -> &'a CheckLine {
@@ -602,8 +656,14 @@ mod tests {
     fn ideal_edges_pass_with_exact_margins() {
         let l = check(&frames(4, |_, _| {}), LineStats::default());
         assert!(l.iter().all(|l| l.pass), "{}", render(&l));
-        assert_eq!(get(&l, "strobe-to-exposure margin, start (min)").measured, "500 us");
-        assert_eq!(get(&l, "strobe-to-exposure margin, end (min)").measured, "500 us");
+        assert_eq!(
+            get(&l, "strobe-to-exposure margin, start (min)").measured,
+            "500 us"
+        );
+        assert_eq!(
+            get(&l, "strobe-to-exposure margin, end (min)").measured,
+            "500 us"
+        );
         assert_eq!(get(&l, "frame period error (max)").measured, "0 us");
         assert_eq!(get(&l, "left/right trigger skew (max)").measured, "0 us");
     }
@@ -668,12 +728,21 @@ mod tests {
         );
         let m = get(&l, "missing edges");
         assert_eq!((m.measured.as_str(), m.pass), ("2", false));
-        assert!(m.note.contains("dropped trigger") && m.note.contains("trigger R rise missing in frames 1"));
+        assert!(
+            m.note.contains("dropped trigger")
+                && m.note.contains("trigger R rise missing in frames 1")
+        );
     }
 
     #[test]
     fn garbage_and_missing_frames_fail() {
-        let l = check(&frames(3, |_, _| {}), LineStats { bad_frames: 2, bad_bytes: 17 });
+        let l = check(
+            &frames(3, |_, _| {}),
+            LineStats {
+                bad_frames: 2,
+                bad_bytes: 17,
+            },
+        );
         let g = get(&l, "serial frames discarded");
         assert_eq!((g.measured.as_str(), g.pass), ("2 (17 bytes)", false));
         assert!(g.note.contains("garbage"));
