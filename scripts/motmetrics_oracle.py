@@ -2,9 +2,11 @@
 """External oracle for `fishtrack eval`: CLEAR MOT and ID metrics by py-motmetrics.
 
 Usage:
-    motmetrics_oracle.py GT.txt PRED.txt [--max-distance 0.6]
-        Prints one JSON object with motmetrics' metrics for the pair of
-        MOTChallenge files (frame,id,bb_left,bb_top,bb_width,bb_height,...).
+    motmetrics_oracle.py GT.txt PRED.txt [GT2.txt PRED2.txt ...] [--max-distance 0.6]
+        Prints, per pair of MOTChallenge files
+        (frame,id,bb_left,bb_top,bb_width,bb_height,...), one line holding a
+        JSON object with motmetrics' metrics (several pairs per call save
+        the interpreter start-up).
     motmetrics_oracle.py --data-dir
         Prints the directory of the data shipped with motmetrics
         (it holds TUD-Campus/gt.txt and TUD-Campus/test.txt).
@@ -70,16 +72,18 @@ def main(argv):
         k = args.index("--max-distance")
         max_distance = float(args[k + 1])
         del args[k : k + 2]
-    if len(args) != 2:
+    if not args or len(args) % 2 != 0:
         print(__doc__, file=sys.stderr)
         return 2
-    gt = mm.io.loadtxt(args[0], fmt="mot15-2D")
-    pred = mm.io.loadtxt(args[1], fmt="mot15-2D")
-    acc = mm.utils.compare_to_groundtruth(gt, pred, "iou", distth=max_distance)
-    summary = mm.metrics.create().compute(acc, metrics=METRICS, return_dataframe=False)
-    out = {k: (None if v != v else float(v)) for k, v in summary.items()}
-    out["motmetrics_version"] = mm.__version__
-    print(json.dumps(out))
+    mh = mm.metrics.create()
+    for gt_path, pred_path in zip(args[0::2], args[1::2]):
+        gt = mm.io.loadtxt(gt_path, fmt="mot15-2D")
+        pred = mm.io.loadtxt(pred_path, fmt="mot15-2D")
+        acc = mm.utils.compare_to_groundtruth(gt, pred, "iou", distth=max_distance)
+        summary = mh.compute(acc, metrics=METRICS, return_dataframe=False)
+        out = {k: (None if v != v else float(v)) for k, v in summary.items()}
+        out["motmetrics_version"] = mm.__version__
+        print(json.dumps(out))
     return 0
 
 
