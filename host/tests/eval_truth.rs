@@ -241,6 +241,7 @@ fn truth_as_output_scores_one_everywhere() {
         (1.0, 0.0, 22)
     );
     // The table and JSON render.
+    println!("{}", r.table());
     assert!(r.table().contains("MOTA"));
     let j: serde_json::Value = serde_json::from_str(&r.json()).unwrap();
     assert_eq!(j["tracking"]["mot"]["mota"], 1.0);

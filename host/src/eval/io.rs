@@ -83,6 +83,8 @@ pub struct StereoRow {
     pub tail: Option<[f64; 3]>,
     /// Length, mm.
     pub length_mm: Option<f64>,
+    /// Line in the file (for error messages).
+    pub line: u64,
 }
 
 /// The header `stereo.csv` must carry.
@@ -332,6 +334,7 @@ pub fn read_stereo(path: &Path) -> Result<Vec<StereoRow>, InputError> {
             head,
             tail,
             length_mm,
+            line,
         });
     }
     Ok(rows)

@@ -99,7 +99,7 @@ pub fn evaluate_truth(truth: &Truth, out: &Path) -> Result<Report, InputError> {
         let rows = io::read_stereo(&stereo_p)?;
         if let Some(r) = rows.iter().find(|r| r.frame > truth.frames) {
             return Err(InputError::plain(
-                stereo_p.display().to_string(),
+                format!("{}: line {}", stereo_p.display(), r.line),
                 format!(
                     "frame {} is beyond the haul's {} frames",
                     r.frame, truth.frames
