@@ -9,6 +9,7 @@
 pub mod error;
 pub mod haul;
 pub mod params_file;
+pub mod eval;
 pub mod truth;
 
 pub use error::InputError;
