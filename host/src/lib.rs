@@ -7,9 +7,10 @@
 #![deny(missing_docs)]
 
 pub mod error;
-pub mod haul;
-pub mod params_file;
 pub mod eval;
+pub mod haul;
+pub mod output;
+pub mod params_file;
 pub mod truth;
 
 pub use error::InputError;
