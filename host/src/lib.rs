@@ -7,7 +7,9 @@
 #![deny(missing_docs)]
 
 pub mod error;
+pub mod eval;
 pub mod haul;
+pub mod output;
 pub mod params_file;
 pub mod timing;
 pub mod truth;

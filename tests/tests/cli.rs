@@ -11,9 +11,8 @@
 //! stale binary, and fails with a clear message if the binary is still
 //! missing.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
-use std::sync::OnceLock;
 
 /// The subcommands DESIGN.md promises.
 const SUBCOMMANDS: [&str; 7] = [
@@ -26,48 +25,8 @@ const SUBCOMMANDS: [&str; 7] = [
     "timing-check",
 ];
 
-/// Path of an up-to-date `fishtrack` binary (built on first use).
 fn fishtrack() -> &'static Path {
-    static BIN: OnceLock<PathBuf> = OnceLock::new();
-    BIN.get_or_init(|| {
-        let bin = fishtrack_tests::bin("fishtrack");
-        let profile_dir = bin.parent().expect("binary has a parent directory");
-        let target_dir = profile_dir.parent().expect("profile dir has a parent");
-        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
-            Some("debug") => "dev".to_string(),
-            Some(other) => other.to_string(),
-            None => "dev".to_string(),
-        };
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
-        let status = Command::new(&cargo)
-            .args([
-                "build",
-                "--quiet",
-                "--locked",
-                "-p",
-                "fishtrack",
-                "--bin",
-                "fishtrack",
-            ])
-            .arg("--profile")
-            .arg(&profile)
-            .arg("--manifest-path")
-            .arg(&manifest)
-            .arg("--target-dir")
-            .arg(target_dir)
-            .status();
-        if let Err(e) = &status {
-            eprintln!("note: could not run {cargo:?} to build fishtrack: {e}");
-        }
-        assert!(
-            bin.is_file(),
-            "the fishtrack binary is missing at {} (cargo build: {status:?}); \
-             build it first with `cargo build -p fishtrack --profile {profile}`",
-            bin.display()
-        );
-        bin
-    })
+    fishtrack_tests::built_bin("fishtrack", "fishtrack")
 }
 
 fn run(args: &[&str]) -> Output {
