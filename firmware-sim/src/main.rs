@@ -91,7 +91,8 @@ fn serve(cli: Cli) -> anyhow::Result<()> {
         cli.serial.display(),
         link::PROTOCOL_VERSION,
         cli.fault
-            .map(|f| format!("{f:?}"))
+            .and_then(|f| clap::ValueEnum::to_possible_value(&f))
+            .map(|v| v.get_name().to_string())
             .unwrap_or_else(|| "none".into())
     );
     let mut dev = Device::new(cli.fault, processor);

@@ -7,9 +7,9 @@
 //! the child processes are not meant to run in parallel.
 
 use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use fishtrack_core::link::{self, Decoder, Report, Status, MAX_FRAME};
@@ -21,40 +21,12 @@ fn serial() -> MutexGuard<'static, ()> {
     SERIAL.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// The binaries belong to other packages, so cargo does not build them for
-/// these tests: build them once (cargo's build lock is free while tests run;
-/// up to date, this is a no-op).
-fn binaries() -> &'static (PathBuf, PathBuf) {
-    static BUILT: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
-    BUILT.get_or_init(|| {
-        let host = fishtrack_tests::bin("fishtrack");
-        let sim = fishtrack_tests::bin("fishtrack-firmware-sim");
-        let profile_dir = host.parent().expect("profile dir");
-        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
-            Some("debug") | None => "dev".to_string(),
-            Some(p) => p.to_string(),
-        };
-        let target_dir = profile_dir.parent().expect("target dir");
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
-        let status = Command::new(cargo)
-            .args(["build", "--quiet", "--profile", &profile])
-            .args(["-p", "fishtrack", "--bin", "fishtrack"])
-            .args([
-                "-p",
-                "fishtrack-firmware-sim",
-                "--bin",
-                "fishtrack-firmware-sim",
-            ])
-            .arg("--manifest-path")
-            .arg(&manifest)
-            .arg("--target-dir")
-            .arg(target_dir)
-            .status()
-            .expect("run cargo build for the fishtrack and firmware-sim binaries");
-        assert!(status.success(), "cargo build of the binaries failed");
-        (host, sim)
-    })
+/// Both binaries, built once and up to date (see `built_bin`).
+fn binaries() -> (&'static Path, &'static Path) {
+    (
+        fishtrack_tests::built_bin("fishtrack", "fishtrack"),
+        fishtrack_tests::built_bin("fishtrack-firmware-sim", "fishtrack-firmware-sim"),
+    )
 }
 
 /// A child process killed when dropped.
