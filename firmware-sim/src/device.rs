@@ -154,6 +154,13 @@ impl Device {
         self.board.borrow().now_us
     }
 
+    /// Move the simulated clock forward to `us` (never back): `--realtime`
+    /// keeps it on the wall clock while idle.
+    pub fn advance_clock_to(&mut self, us: u64) {
+        let mut b = self.board.borrow_mut();
+        b.now_us = b.now_us.max(us);
+    }
+
     /// Counters (rx/tx are kept by the caller through [`Device::counters_mut`]).
     pub fn counters_mut(&mut self) -> &mut Counters {
         &mut self.counters

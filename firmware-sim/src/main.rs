@@ -105,6 +105,9 @@ fn serve(cli: Cli) -> anyhow::Result<()> {
     let wall0 = Instant::now();
     let realtime = cli.realtime;
     loop {
+        if realtime {
+            dev.advance_clock_to(u64::try_from(wall0.elapsed().as_micros()).unwrap_or(u64::MAX));
+        }
         let timeout = if dev.running() { 1 } else { 50 };
         link.port.set_timeout(Duration::from_millis(timeout))?;
         match link.port.read(&mut rx) {
