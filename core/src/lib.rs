@@ -20,11 +20,17 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 pub mod error;
+pub mod geometry;
 pub mod image;
+pub mod length;
 pub mod object;
 pub mod params;
+pub mod refine;
+pub mod snake;
+pub mod stereo;
 
 pub use error::{ImageError, ParamError};
+pub use geometry::StereoGeometry;
 pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;

@@ -1,0 +1,232 @@
+//! Stereo pairing (Section IV.A) and 3-D length (Section IV.D) of the core
+//! on rendered synthetic stereo pairs with known 3-D fish.
+//!
+//! Run with `--nocapture` to see the figures.
+
+mod stereo_scene;
+
+use fishtrack_core::length::{measure_length, LengthConfig};
+use fishtrack_core::stereo::{pair_objects, PairingLimits};
+use fishtrack_core::{ImageView, Params};
+use stereo_scene::*;
+
+fn objects(img: &[u8], masks: &[&Vec<bool>], w: usize, h: usize) -> Objs {
+    let mut o = Objs::new();
+    for m in masks {
+        push_object(&mut o, img, m, w, h);
+    }
+    o
+}
+
+#[test]
+fn pairing_with_swapped_order_distractor_border_cut_and_no_match() {
+    let sc = Scene::new(1024, 640);
+    let a = fish_at(-380.0, -150.0, 1600.0, [1.0, 0.1, 0.15], 280.0, 110.0, 1);
+    let b = fish_at(-150.0, 70.0, 2200.0, [1.0, -0.05, -0.1], 350.0, 110.0, 2);
+    let c = fish_at(-150.0, -30.0, 1300.0, [1.0, 0.2, 0.0], 250.0, 110.0, 3);
+    // cut by the right border in the left view, whole in the right view
+    let e = fish_at(560.0, 200.0, 1500.0, [1.0, 0.0, 0.0], 300.0, 110.0, 5);
+    // only in the left view (no match), same band as b
+    let d = fish_at(-420.0, 90.0, 2400.0, [1.0, 0.0, 0.1], 300.0, 110.0, 4);
+    // only in the right view: a distractor on a's band, different texture
+    let f = fish_at(-50.0, -160.0, 1700.0, [1.0, 0.05, 0.0], 280.0, 110.0, 99);
+    let with_left = render(&sc, &[a, b, c, e, d]);
+    let with_right = render(&sc, &[a, b, c, e, f]);
+    let (w, h) = (sc.w, sc.h);
+    let m = |r: &Rendered, k: usize, v: usize| r.masks[k][v].clone();
+    // left: a b c e d (full masks, view 0 → index 1)
+    let lm: Vec<Vec<bool>> = (0..5).map(|k| m(&with_left, k, 1)).collect();
+    // right, swapped order: f e c b a (view 1 → index 3)
+    let rm: Vec<Vec<bool>> = [4, 3, 2, 1, 0]
+        .iter()
+        .map(|&k| m(&with_right, k, 3))
+        .collect();
+    let left = objects(&with_left.left, &lm.iter().collect::<Vec<_>>(), w, h);
+    let right = objects(&with_right.right, &rm.iter().collect::<Vec<_>>(), w, h);
+    assert!(
+        left.items[3].bbox.right() as usize == w,
+        "e must be cut by the border in the left view"
+    );
+    let lv = ImageView::packed(&with_left.left, w, h).unwrap();
+    let rv = ImageView::packed(&with_right.right, w, h).unwrap();
+    let geom = sc.geometry();
+    let out = pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
+    let got: Vec<(u16, u16)> = out.pairs.iter().map(|p| (p.left, p.right)).collect();
+    println!("pairs (left, right): {got:?}; stats {:?}", out.stats);
+    for p in out.pairs.iter() {
+        println!("  pair {:?}", p);
+    }
+    // a→4, b→3, c→2, e→1; d unpaired; f (right 0) unused
+    assert_eq!(got, vec![(0, 4), (1, 3), (2, 2), (3, 1)]);
+    assert_eq!(out.stats.unpaired_left, 1);
+    // coarse disparity within a few pixels of the truth at the box centre
+    for (p, fish) in out.pairs.iter().zip([a, b, c, e]) {
+        let zc = 0.5 * (fish.head[2] + fish.tail[2]);
+        let d_true = sc.f * sc.baseline / zc;
+        let tol = 0.5 * (sc.project(fish.head).2 - sc.project(fish.tail).2).abs() + 3.0;
+        assert!(
+            (p.d_o as f64 - d_true).abs() <= tol,
+            "d_o {} vs {d_true}",
+            p.d_o
+        );
+    }
+    // dense block matching over the frame would cost this many absolute differences
+    let dense = fishtrack_core::stereo::dense_sad_ops(w as u64, h as u64, 256);
+    println!(
+        "SAD ops: object-height blocks {} vs dense {} (×{:.0})",
+        out.stats.sad_ops,
+        dense,
+        dense as f64 / out.stats.sad_ops as f64
+    );
+    assert!(dense >= 50 * out.stats.sad_ops);
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Seg {
+    /// Both views include the tail.
+    Full,
+    /// Left crops the tail, right keeps it.
+    LeftCropped,
+    /// Both views crop the tail.
+    BothCropped,
+}
+
+fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool) -> (f64, bool) {
+    let sc = Scene::new(1024, 640);
+    let r = render(&sc, &[fish]);
+    let (w, h) = (sc.w, sc.h);
+    let (lmask, rmask) = match seg {
+        Seg::Full => (&r.masks[0][1], &r.masks[0][3]),
+        Seg::LeftCropped => (&r.masks[0][0], &r.masks[0][3]),
+        Seg::BothCropped => (&r.masks[0][0], &r.masks[0][2]),
+    };
+    let left = objects(&r.left, &[lmask], w, h);
+    let right = objects(&r.right, &[rmask], w, h);
+    let lv = ImageView::packed(&r.left, w, h).unwrap();
+    let rv = ImageView::packed(&r.right, w, h).unwrap();
+    let geom = sc.geometry();
+    let pairs = pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
+    assert_eq!(pairs.pairs.len(), 1, "{fish:?} {seg:?}");
+    let params = Params {
+        tail_compensation: comp,
+        ..Params::default()
+    };
+    let cfg = LengthConfig {
+        snake_every_end: every_end,
+        ..LengthConfig::default()
+    };
+    let l = measure_length::<N, R, 1024>(
+        &lv,
+        &rv,
+        &left,
+        &right,
+        &pairs.pairs[0],
+        &geom,
+        &params,
+        &cfg,
+    )
+    .unwrap();
+    let truth = fish.length();
+    if std::env::var("STEREO_DEBUG").is_ok() {
+        let (hx, hy, hd) = sc.project(fish.head);
+        let (tx, ty, td) = sc.project(fish.tail);
+        println!("truth head ({hx:.1},{hy:.1},d {hd:.2}) tail ({tx:.1},{ty:.1},d {td:.2}); pair {:?}\n  got {l:?}", pairs.pairs[0]);
+    }
+    let err = (l.length_mm as f64 - truth) / truth * 100.0;
+    let comped = l.ends.iter().any(|e| e.compensated);
+    if comp && !every_end {
+        println!(
+            "   eq15 SAD ratios {:.2} {:.2}",
+            l.ends[0].sad_ratio, l.ends[1].sad_ratio
+        );
+    }
+    (err, comped)
+}
+
+fn poses(tail_grey: f64) -> Vec<Fish> {
+    vec![
+        fish_at(-150.0, -20.0, 1500.0, [1.0, 0.0, 0.0], 300.0, tail_grey, 11),
+        fish_at(-200.0, 40.0, 1800.0, [1.0, 0.15, 0.3], 320.0, tail_grey, 12),
+        fish_at(
+            -100.0,
+            -60.0,
+            1300.0,
+            [1.0, -0.25, -0.2],
+            240.0,
+            tail_grey,
+            13,
+        ),
+        fish_at(-250.0, 0.0, 2200.0, [1.0, 0.05, 0.5], 400.0, tail_grey, 14),
+        // head on the right (swimming the other way), tilted
+        fish_at(150.0, 30.0, 1600.0, [-1.0, 0.3, 0.1], 280.0, tail_grey, 15),
+    ]
+}
+
+#[test]
+fn length_with_and_without_tail_compensation() {
+    println!("fish | seg | comp off % | comp eq15 % | comp every end %");
+    let mut worst_bright = 0.0f64;
+    let mut worst_dim_asym = 0.0f64;
+    let mut worst_dim_sym_every = 0.0f64;
+    let mut sum_off = 0.0;
+    let mut sum_on = 0.0;
+    let mut n_dim = 0.0;
+    for (grey, segs) in [
+        (110.0, vec![Seg::Full]),
+        (48.0, vec![Seg::LeftCropped, Seg::BothCropped]),
+    ] {
+        for (i, fish) in poses(grey).into_iter().enumerate() {
+            for &seg in &segs {
+                let (off, _) = length_error(fish, seg, false, false);
+                let (on, c_on) = length_error(fish, seg, true, false);
+                let (every, c_every) = length_error(fish, seg, true, true);
+                println!(
+                    "{i} tail {grey} | {seg:?} | {off:+.2} | {on:+.2}{} | {every:+.2}{}",
+                    if c_on { " (snake)" } else { "" },
+                    if c_every { " (snake)" } else { "" }
+                );
+                match seg {
+                    Seg::Full => {
+                        worst_bright = worst_bright.max(off.abs()).max(on.abs()).max(every.abs());
+                        // compensation must not hurt fish whose tail is whole
+                        assert!(
+                            on.abs() <= off.abs() + 0.5,
+                            "comp hurt fish {i}: {off} → {on}"
+                        );
+                        assert!(
+                            every.abs() <= off.abs() + 1.0,
+                            "every-end hurt fish {i}: {off} → {every}"
+                        );
+                    }
+                    Seg::LeftCropped => {
+                        worst_dim_asym = worst_dim_asym.max(on.abs());
+                        sum_off += off.abs();
+                        sum_on += on.abs();
+                        n_dim += 1.0;
+                        assert!(
+                            on.abs() < off.abs(),
+                            "comp did not help fish {i}: {off} → {on}"
+                        );
+                    }
+                    Seg::BothCropped => {
+                        worst_dim_sym_every = worst_dim_sym_every.max(every.abs());
+                        assert!(
+                            every.abs() < off.abs(),
+                            "every-end did not help fish {i}: {off} → {every}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "worst |err|: whole tails {worst_bright:.2} %, dim tail cropped in left view (eq15 snake) {worst_dim_asym:.2} %, \
+         dim tail cropped in both views (every-end snake) {worst_dim_sym_every:.2} %; \
+         mean |err| dim/left-cropped off {:.2} % on {:.2} %",
+        sum_off / n_dim,
+        sum_on / n_dim
+    );
+    assert!(worst_bright < 3.0);
+    assert!(worst_dim_asym < 5.0);
+    assert!(worst_dim_sym_every < 5.0);
+}
