@@ -32,7 +32,7 @@
 //! ≤ 6 whole-box evaluations for `d_o`; [`PairingStats::sad_ops`] counts them,
 //! [`dense_sad_ops`] gives the dense block-matching figure to compare with.
 //! Memory bound: the cost matrix `N² · 4` bytes and `O(N)` work arrays on the
-//! stack; no heap.
+//! stack (the chosen pairs' block matches are recomputed, not stored); no heap.
 
 use crate::error::ImageError;
 use crate::geometry::StereoGeometry;
@@ -382,7 +382,6 @@ pub fn pair_objects<const N: usize, const R: usize>(
     let nr = right.items.len().min(N);
     let mut out = StereoPairs::<N>::default();
     let mut cost = [[NO_PAIR; N]; N];
-    let mut matches = [[None::<BlockMatch>; N]; N];
     for (i, lo) in left.items.iter().enumerate().take(nl) {
         for (j, ro) in right.items.iter().enumerate().take(nr) {
             let (lb, rb) = (lo.bbox, ro.bbox);
@@ -407,24 +406,42 @@ pub fn pair_objects<const N: usize, const R: usize>(
             );
             match m {
                 Some(m) if m.mu_sad <= limits.max_sad_per_pixel => {
-                    if let (Some(row), Some(mrow)) = (cost.get_mut(i), matches.get_mut(i)) {
-                        if let (Some(c), Some(mm)) = (row.get_mut(j), mrow.get_mut(j)) {
-                            *c = m.mu_sad;
-                            *mm = Some(m);
-                        }
+                    if let Some(c) = cost.get_mut(i).and_then(|row| row.get_mut(j)) {
+                        *c = m.mu_sad;
                     }
                 }
                 _ => out.stats.rejected += 1,
             }
         }
     }
+    // the few chosen matches are recomputed rather than stored (N² of them)
+    let rematch = |i: usize, j: usize| -> Option<BlockMatch> {
+        let plausible = cost
+            .get(i)
+            .and_then(|r| r.get(j))
+            .is_some_and(|c| *c < NO_PAIR);
+        let (lo, ro) = (left.items.get(i)?, right.items.get(j)?);
+        let mut scratch = 0u64;
+        if !plausible {
+            return None;
+        }
+        match_boxes(
+            left_img,
+            right_img,
+            lo.bbox,
+            ro.bbox,
+            d_lo,
+            d_hi,
+            &mut scratch,
+        )
+    };
     let n = nl.max(nr);
     let mut col4row = [usize::MAX; N];
     solve_assignment(&cost, n, &mut col4row);
     let mut taken_by = [usize::MAX; N];
     for i in 0..nl {
         let j = col4row.get(i).copied().unwrap_or(usize::MAX);
-        let m = matches.get(i).and_then(|r| r.get(j)).copied().flatten();
+        let m = rematch(i, j);
         if let (Some(m), Some(t)) = (m, taken_by.get_mut(j)) {
             *t = i;
             let _ = out.pairs.push(StereoPair {
@@ -442,19 +459,14 @@ pub fn pair_objects<const N: usize, const R: usize>(
         if out.pairs.iter().any(|p| p.left as usize == i) {
             continue;
         }
-        let row = match matches.get(i) {
-            Some(r) => r,
-            None => continue,
-        };
-        let mut best: Option<(usize, BlockMatch)> = None;
-        for (j, m) in row.iter().enumerate().take(nr) {
-            if let Some(m) = m {
-                if best.map(|(_, b)| m.mu_sad < b.mu_sad).unwrap_or(true) {
-                    best = Some((j, *m));
-                }
+        let Some(row) = cost.get(i) else { continue };
+        let mut best: Option<(usize, f32)> = None;
+        for (j, c) in row.iter().enumerate().take(nr) {
+            if *c < NO_PAIR && best.map(|(_, b)| *c < b).unwrap_or(true) {
+                best = Some((j, *c));
             }
         }
-        let Some((j, m)) = best else {
+        let Some((j, m)) = best.and_then(|(j, _)| Some((j, rematch(i, j)?))) else {
             out.stats.unpaired_left += 1;
             continue;
         };

@@ -230,3 +230,102 @@ fn length_with_and_without_tail_compensation() {
     assert!(worst_dim_asym < 5.0);
     assert!(worst_dim_sym_every < 5.0);
 }
+
+/// The core against the f64 reference (`fishtrack::reference_stereo`):
+/// identical pairs, lengths within 0.5 %, on the pairing scene and on every
+/// length scene (tail compensation on, eq. 15 and every-end modes).
+#[test]
+fn core_agrees_with_the_f64_reference() {
+    use fishtrack::reference_stereo as rs;
+    let sc = Scene::new(1024, 640);
+    let mut scenes: Vec<(Vec<Fish>, Seg)> = vec![(
+        vec![
+            fish_at(-380.0, -150.0, 1600.0, [1.0, 0.1, 0.15], 280.0, 110.0, 1),
+            fish_at(-150.0, 70.0, 2200.0, [1.0, -0.05, -0.1], 350.0, 110.0, 2),
+            fish_at(-150.0, -30.0, 1300.0, [1.0, 0.2, 0.0], 250.0, 110.0, 3),
+            fish_at(560.0, 200.0, 1500.0, [1.0, 0.0, 0.0], 300.0, 110.0, 5),
+        ],
+        Seg::Full,
+    )];
+    for f in poses(110.0) {
+        scenes.push((vec![f], Seg::Full));
+    }
+    for f in poses(48.0) {
+        scenes.push((vec![f], Seg::LeftCropped));
+        scenes.push((vec![f], Seg::BothCropped));
+    }
+    let geom = sc.geometry();
+    let rgeom = rs::Geometry::from_core(&geom);
+    let limits = PairingLimits::default();
+    let params = Params::default();
+    let mut worst = 0.0f64;
+    let mut n_pairs = 0;
+    for every_end in [false, true] {
+        let cfg = LengthConfig {
+            snake_every_end: every_end,
+            ..LengthConfig::default()
+        };
+        for (fish, seg) in &scenes {
+            let r = render(&sc, fish);
+            let (w, h) = (sc.w, sc.h);
+            let (li, ri) = match seg {
+                Seg::Full => (1, 3),
+                Seg::LeftCropped => (0, 3),
+                Seg::BothCropped => (0, 2),
+            };
+            let lm: Vec<&Vec<bool>> = r.masks.iter().map(|m| &m[li]).collect();
+            let rm: Vec<&Vec<bool>> = r.masks.iter().rev().map(|m| &m[ri]).collect();
+            let left = objects(&r.left, &lm, w, h);
+            let right = objects(&r.right, &rm, w, h);
+            let lv = ImageView::packed(&r.left, w, h).unwrap();
+            let rv = ImageView::packed(&r.right, w, h).unwrap();
+            let pairs = pair_objects(&lv, &rv, &left, &right, &geom, &limits).unwrap();
+            let core: Vec<(usize, usize, Option<f64>)> = pairs
+                .pairs
+                .iter()
+                .map(|p| {
+                    let l = measure_length::<N, R, 1024>(
+                        &lv, &rv, &left, &right, p, &geom, &params, &cfg,
+                    );
+                    (
+                        p.left as usize,
+                        p.right as usize,
+                        l.ok().map(|l| l.length_mm as f64),
+                    )
+                })
+                .collect();
+            let (gl, gr) = (
+                rs::Gray {
+                    data: &r.left,
+                    w,
+                    h,
+                },
+                rs::Gray {
+                    data: &r.right,
+                    w,
+                    h,
+                },
+            );
+            let (rl, rr) = (rs::ref_objects(&left), rs::ref_objects(&right));
+            let rpairs = rs::pair(&gl, &gr, &rl, &rr, &rgeom, &rs::Limits::from(&limits));
+            let reference: Vec<(usize, usize, Option<f64>)> = rpairs
+                .iter()
+                .map(|p| {
+                    let l = rs::length(&gl, &gr, &rl, &rr, p, &rgeom, &params, &cfg);
+                    (p.left, p.right, l.map(|l| l.length))
+                })
+                .collect();
+            let a = rs::compare(&core, &reference);
+            assert!(
+                a.ok(),
+                "{seg:?} every_end={every_end}: {a:?}\ncore {core:?}\nref {reference:?}"
+            );
+            worst = worst.max(a.max_length_rel_diff);
+            n_pairs += core.len();
+        }
+    }
+    println!(
+        "core vs f64 reference: {n_pairs} pairs identical, worst length difference {:.4} %",
+        worst * 100.0
+    );
+}
