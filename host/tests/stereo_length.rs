@@ -329,3 +329,45 @@ fn core_agrees_with_the_f64_reference() {
         worst * 100.0
     );
 }
+
+/// Occlusion exception: two fish separate in the left view merge into one
+/// blob in the right view; both pair with it, the second flagged `occluded`.
+#[test]
+fn occlusion_shares_a_right_blob() {
+    let sc = Scene::new(1024, 640);
+    let a = fish_at(-300.0, 0.0, 1500.0, [1.0, 0.0, 0.0], 200.0, 110.0, 21);
+    // far fish: left x ≈ 200..280, right x ≈ 120..200, touching a's right image
+    let b = fish_at(-967.0, 10.0, 2500.0, [1.0, 0.0, 0.0], 250.0, 110.0, 22);
+    let r = render(&sc, &[a, b]);
+    let (w, h) = (sc.w, sc.h);
+    let left = objects(&r.left, &[&r.masks[0][1], &r.masks[1][1]], w, h);
+    let union: Vec<bool> = r.masks[0][3]
+        .iter()
+        .zip(&r.masks[1][3])
+        .map(|(p, q)| *p || *q)
+        .collect();
+    let right = objects(&r.right, &[&union], w, h);
+    println!(
+        "left boxes {:?} {:?}, right blob {:?}",
+        left.items[0].bbox, left.items[1].bbox, right.items[0].bbox
+    );
+    let lv = ImageView::packed(&r.left, w, h).unwrap();
+    let rv = ImageView::packed(&r.right, w, h).unwrap();
+    let limits = PairingLimits {
+        min_size_ratio: 0.3,
+        ..PairingLimits::default()
+    };
+    let out = pair_objects(&lv, &rv, &left, &right, &sc.geometry(), &limits).unwrap();
+    println!("{:?}\n{:?}", out.pairs, out.stats);
+    assert_eq!(out.pairs.len(), 2);
+    assert!(out.pairs.iter().all(|p| p.right == 0));
+    assert_eq!(out.pairs.iter().filter(|p| p.occluded).count(), 1);
+    assert_eq!(out.stats.occlusions, 1);
+    // each keeps its own disparity
+    let mut d: Vec<f32> = out.pairs.iter().map(|p| p.d_o).collect();
+    d.sort_by(|x, y| x.total_cmp(y));
+    assert!(
+        (d[0] - 80.0).abs() <= 3.0 && (d[1] - 133.3).abs() <= 3.0,
+        "{d:?}"
+    );
+}
