@@ -6,7 +6,7 @@
 //! - End points: the two ends of the left object along its oriented box's
 //!   first principal axis, taken as the `k`-th most extreme mask-pixel
 //!   projections (`k = 1 + area/4096`, at most 16) so a stray pixel does not
-//!   set the length.
+//!   set the length, moved out by half a pixel to the outline.
 //! - End validation, eq. (15): an `h_o × h_o` square centred on the axis just
 //!   inside each end of the left object is compared (SAD per pixel) with the
 //!   square at the corresponding end of the right object; `SAD / μ_SAD >
@@ -36,6 +36,10 @@ use crate::refine::{refine_disparity, RefinedBlock};
 use crate::snake::{background_level, tail_snake, SnakeParams};
 use crate::stereo::StereoPair;
 use nalgebra::Vector3;
+
+/// An object's outline lies on average half a pixel beyond its outermost
+/// mask-pixel centres (a pixel is in the mask when its centre is inside).
+pub const END_HALF_PIXEL: f32 = 0.5;
 
 /// Most extreme pixels considered when picking an end (rank `k` ≤ this).
 const MAX_END_RANK: usize = 16;
@@ -355,10 +359,13 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     let (cx, cy) = (lo.obb.cx, lo.obb.cy);
     let (t_lo, t_hi) =
         axis_extent(lruns, cx, cy, ux, uy, end_rank(lo.area)).ok_or(LengthError::BadPair)?;
+    // the outline lies half a pixel beyond the outermost pixel centres
+    let (t_lo, t_hi) = (t_lo - END_HALF_PIXEL, t_hi + END_HALF_PIXEL);
     let (rux, ruy) = unit_axis(ro);
     let (rcx, rcy) = (ro.obb.cx, ro.obb.cy);
     let (rt_lo, rt_hi) =
         axis_extent(rruns, rcx, rcy, rux, ruy, end_rank(ro.area)).ok_or(LengthError::BadPair)?;
+    let (rt_lo, rt_hi) = (rt_lo - END_HALF_PIXEL, rt_hi + END_HALF_PIXEL);
     let right_ends = [
         (rcx + rt_lo * rux, rcy + rt_lo * ruy, -1.0f32),
         (rcx + rt_hi * rux, rcy + rt_hi * ruy, 1.0f32),

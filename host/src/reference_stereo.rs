@@ -460,7 +460,7 @@ pub fn pair(
     pairs
 }
 
-/// The k-th extreme projections of an object's pixels on its axis.
+/// The k-th extreme projections of an object's pixel centres on its axis.
 fn extent(o: &RefObject) -> (f64, f64) {
     let (ux, uy) = (o.angle.cos(), o.angle.sin());
     let mut t: Vec<f64> = o
@@ -708,8 +708,10 @@ pub fn length(
     }
     let u = (lo.angle.cos(), lo.angle.sin());
     let (t_lo, t_hi) = extent(lo);
+    let (t_lo, t_hi) = (t_lo - 0.5, t_hi + 0.5);
     let ru = (ro.angle.cos(), ro.angle.sin());
     let (rt_lo, rt_hi) = extent(ro);
+    let (rt_lo, rt_hi) = (rt_lo - 0.5, rt_hi + 0.5);
     let rends = [
         (
             (ro.centre.0 + rt_lo * ru.0, ro.centre.1 + rt_lo * ru.1),
