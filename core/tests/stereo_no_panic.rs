@@ -14,7 +14,10 @@ use proptest::prelude::*;
 const N: usize = 4;
 const R: usize = 64;
 
-fn obj_strategy() -> impl Strategy<Value = (Roi, (f32, f32, f32, f32, f32), Vec<(u16, u16, u16)>)> {
+/// Upright box, oriented box (cx, cy, half_w, half_h, angle), runs (y, x0, x1).
+type ObjSpec = (Roi, (f32, f32, f32, f32, f32), Vec<(u16, u16, u16)>);
+
+fn obj_strategy() -> impl Strategy<Value = ObjSpec> {
     (
         (0u32..90, 0u32..70, 0u32..90, 0u32..70).prop_map(|(x, y, w, h)| Roi::new(x, y, w, h)),
         (
@@ -28,7 +31,7 @@ fn obj_strategy() -> impl Strategy<Value = (Roi, (f32, f32, f32, f32, f32), Vec<
     )
 }
 
-fn build(objs: &[(Roi, (f32, f32, f32, f32, f32), Vec<(u16, u16, u16)>)]) -> Objects<N, R> {
+fn build(objs: &[ObjSpec]) -> Objects<N, R> {
     let mut o = Objects::<N, R>::new();
     for (bbox, (cx, cy, hw, hh, a), runs) in objs.iter().take(N) {
         let start = o.runs.len() as u32;
