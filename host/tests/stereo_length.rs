@@ -91,8 +91,9 @@ enum Seg {
     BothCropped,
 }
 
-fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool) -> (f64, bool) {
-    let sc = Scene::new(1024, 640);
+fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool, noise: f64) -> (f64, bool) {
+    let mut sc = Scene::new(1024, 640);
+    sc.noise = noise;
     let r = render(&sc, &[fish]);
     let (w, h) = (sc.w, sc.h);
     let (lmask, rmask) = match seg {
@@ -164,71 +165,74 @@ fn poses(tail_grey: f64) -> Vec<Fish> {
 
 #[test]
 fn length_with_and_without_tail_compensation() {
-    println!("fish | seg | comp off % | comp eq15 % | comp every end %");
-    let mut worst_bright = 0.0f64;
-    let mut worst_dim_asym = 0.0f64;
-    let mut worst_dim_sym_every = 0.0f64;
-    let mut sum_off = 0.0;
-    let mut sum_on = 0.0;
-    let mut n_dim = 0.0;
-    for (grey, segs) in [
-        (110.0, vec![Seg::Full]),
-        (48.0, vec![Seg::LeftCropped, Seg::BothCropped]),
-    ] {
-        for (i, fish) in poses(grey).into_iter().enumerate() {
-            for &seg in &segs {
-                let (off, _) = length_error(fish, seg, false, false);
-                let (on, c_on) = length_error(fish, seg, true, false);
-                let (every, c_every) = length_error(fish, seg, true, true);
-                println!(
-                    "{i} tail {grey} | {seg:?} | {off:+.2} | {on:+.2}{} | {every:+.2}{}",
-                    if c_on { " (snake)" } else { "" },
-                    if c_every { " (snake)" } else { "" }
-                );
-                match seg {
-                    Seg::Full => {
-                        worst_bright = worst_bright.max(off.abs()).max(on.abs()).max(every.abs());
-                        // compensation must not hurt fish whose tail is whole
-                        assert!(
-                            on.abs() <= off.abs() + 0.5,
-                            "comp hurt fish {i}: {off} → {on}"
-                        );
-                        assert!(
-                            every.abs() <= off.abs() + 1.0,
-                            "every-end hurt fish {i}: {off} → {every}"
-                        );
-                    }
-                    Seg::LeftCropped => {
-                        worst_dim_asym = worst_dim_asym.max(on.abs());
-                        sum_off += off.abs();
-                        sum_on += on.abs();
-                        n_dim += 1.0;
-                        assert!(
-                            on.abs() < off.abs(),
-                            "comp did not help fish {i}: {off} → {on}"
-                        );
-                    }
-                    Seg::BothCropped => {
-                        worst_dim_sym_every = worst_dim_sym_every.max(every.abs());
-                        assert!(
-                            every.abs() < off.abs(),
-                            "every-end did not help fish {i}: {off} → {every}"
-                        );
+    for noise in [4.0, 8.0] {
+        println!("noise σ {noise}: fish | seg | comp off % | comp eq15 % | comp every end %");
+        let mut worst_bright = 0.0f64;
+        let mut worst_dim_asym = 0.0f64;
+        let mut worst_dim_sym_every = 0.0f64;
+        let mut sum_off = 0.0;
+        let mut sum_on = 0.0;
+        let mut n_dim = 0.0;
+        for (grey, segs) in [
+            (110.0, vec![Seg::Full]),
+            (48.0, vec![Seg::LeftCropped, Seg::BothCropped]),
+        ] {
+            for (i, fish) in poses(grey).into_iter().enumerate() {
+                for &seg in &segs {
+                    let (off, _) = length_error(fish, seg, false, false, noise);
+                    let (on, c_on) = length_error(fish, seg, true, false, noise);
+                    let (every, c_every) = length_error(fish, seg, true, true, noise);
+                    println!(
+                        "{i} tail {grey} | {seg:?} | {off:+.2} | {on:+.2}{} | {every:+.2}{}",
+                        if c_on { " (snake)" } else { "" },
+                        if c_every { " (snake)" } else { "" }
+                    );
+                    match seg {
+                        Seg::Full => {
+                            worst_bright =
+                                worst_bright.max(off.abs()).max(on.abs()).max(every.abs());
+                            // compensation must not hurt fish whose tail is whole
+                            assert!(
+                                on.abs() <= off.abs() + 0.5,
+                                "comp hurt fish {i}: {off} → {on}"
+                            );
+                            assert!(
+                                every.abs() <= off.abs() + 1.0,
+                                "every-end hurt fish {i}: {off} → {every}"
+                            );
+                        }
+                        Seg::LeftCropped => {
+                            worst_dim_asym = worst_dim_asym.max(on.abs());
+                            sum_off += off.abs();
+                            sum_on += on.abs();
+                            n_dim += 1.0;
+                            assert!(
+                                on.abs() < off.abs(),
+                                "comp did not help fish {i}: {off} → {on}"
+                            );
+                        }
+                        Seg::BothCropped => {
+                            worst_dim_sym_every = worst_dim_sym_every.max(every.abs());
+                            assert!(
+                                every.abs() < off.abs(),
+                                "every-end did not help fish {i}: {off} → {every}"
+                            );
+                        }
                     }
                 }
             }
         }
-    }
-    println!(
+        println!(
         "worst |err|: whole tails {worst_bright:.2} %, dim tail cropped in left view (eq15 snake) {worst_dim_asym:.2} %, \
          dim tail cropped in both views (every-end snake) {worst_dim_sym_every:.2} %; \
          mean |err| dim/left-cropped off {:.2} % on {:.2} %",
         sum_off / n_dim,
         sum_on / n_dim
     );
-    assert!(worst_bright < 3.0);
-    assert!(worst_dim_asym < 5.0);
-    assert!(worst_dim_sym_every < 5.0);
+        assert!(worst_bright < 3.0);
+        assert!(worst_dim_asym < 5.0);
+        assert!(worst_dim_sym_every < 5.0);
+    }
 }
 
 /// The core against the f64 reference (`fishtrack::reference_stereo`):
