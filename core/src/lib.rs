@@ -23,13 +23,19 @@
 )]
 
 pub mod error;
+pub mod geometry;
 pub mod image;
 pub mod link;
 pub mod object;
 pub mod params;
 pub mod strobe;
+pub mod length;
+pub mod refine;
+pub mod snake;
+pub mod stereo;
 
 pub use error::{ImageError, ParamError};
+pub use geometry::StereoGeometry;
 pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;

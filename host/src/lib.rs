@@ -12,6 +12,7 @@ pub mod haul;
 pub mod output;
 pub mod params_file;
 pub mod timing;
+pub mod reference_stereo;
 pub mod truth;
 
 pub use error::InputError;

@@ -1,0 +1,372 @@
+//! Fish-tail end compensation with a snake (Section IV.D.1, Fig. 10).
+//!
+//! A closed active contour of [`SNAKE_POINTS`] points starts as a circle of
+//! diameter `h_o / 2` placed beside the mismatched end along the principal
+//! axis (touching the end). It evolves with the greedy algorithm of Williams
+//! & Shah (each point moves to the lowest-energy position of its
+//! `(2k+1)²` neighbourhood, at most `iterations` sweeps) under
+//! - continuity `α·|d̄ − |pᵢ − pᵢ₋₁|| / d̄` and curvature
+//!   `β·|pᵢ₋₁ − 2pᵢ + pᵢ₊₁|² / d̄²` (internal energy),
+//! - edge attraction `−γ·|∇I| / max|∇I|` on a 5 × 5 box-smoothed image,
+//! - a region pressure `κ`: outward over pixels at or above the tail level
+//!   `τ`, inward over darker ones (a balloon force signed by the region test,
+//!   so the contour grows over a dim tail and collapses over background).
+//!
+//! Points may not cross back behind the end (the body side). The level `τ`
+//! sits between the local background (median and MAD of a ring around the
+//! object's box) and the body mean. The enclosed region is accepted when it
+//! is large enough, mostly at or above `τ`, and within the closing radius
+//! (`h_o/4`) of the end: then, as the morphological closing of body and
+//! region would, it extends the body to the region's far end along the axis.
+//! The caller recomputes the end point from [`SnakeResult::far_t`].
+//!
+//! Memory bound: `SNAKE_POINTS` points and a 512-sample ring on the stack.
+//! Work: `iterations · SNAKE_POINTS · (2k+1)² · 25` pixel reads.
+
+use crate::image::{ImageView, Roi};
+
+/// Number of contour points.
+pub const SNAKE_POINTS: usize = 32;
+
+/// Most background samples taken around the object's box.
+const RING_SAMPLES: usize = 512;
+
+/// Snake weights and bounds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SnakeParams {
+    /// α — continuity weight.
+    pub alpha: f32,
+    /// β — curvature weight.
+    pub beta: f32,
+    /// γ — edge-attraction weight.
+    pub gamma: f32,
+    /// κ — region pressure weight.
+    pub kappa: f32,
+    /// Sweeps over all points (iteration bound).
+    pub iterations: u16,
+    /// Neighbourhood half-size k (candidates `(2k+1)²`).
+    pub reach: u8,
+    /// Fraction of the background-to-body contrast that sets the tail level τ.
+    pub level_fraction: f32,
+}
+
+impl Default for SnakeParams {
+    fn default() -> Self {
+        SnakeParams {
+            alpha: 0.3,
+            beta: 0.2,
+            gamma: 0.5,
+            kappa: 2.0,
+            iterations: 200,
+            reach: 2,
+            level_fraction: 0.15,
+        }
+    }
+}
+
+/// What the snake found beside one end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SnakeResult {
+    /// Final contour.
+    pub points: [(f32, f32); SNAKE_POINTS],
+    /// Region accepted as a missing tail.
+    pub accepted: bool,
+    /// Far extent of the accepted region beyond the end, along the axis, pixels.
+    pub far_t: f32,
+    /// Enclosed area, pixels.
+    pub area: f32,
+    /// Fraction of enclosed pixels at or above τ.
+    pub inside_fraction: f32,
+    /// Tail level τ used.
+    pub level: f32,
+    /// Sweeps run.
+    pub sweeps: u16,
+}
+
+/// 5 × 5 box mean at `(x, y)` (replicated border).
+fn smooth(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
+    let mut s = 0u32;
+    for dy in -2..=2 {
+        for dx in -2..=2 {
+            s += img.get_clamped((x + dx) as isize, (y + dy) as isize) as u32;
+        }
+    }
+    s as f32 / 25.0
+}
+
+fn grad(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
+    let gx = smooth(img, x + 1, y) - smooth(img, x - 1, y);
+    let gy = smooth(img, x, y + 1) - smooth(img, x, y - 1);
+    micromath::F32(gx * gx + gy * gy).sqrt().0
+}
+
+/// Background level around `bbox`: median and 1.4826·MAD of up to 512 pixels
+/// on the border of `bbox` grown by `margin` (clipped to the image).
+pub fn background_level(img: &ImageView<'_>, bbox: Roi, margin: u32) -> (f32, f32) {
+    let r = bbox.expand_clipped(margin, img.width() as u32, img.height() as u32);
+    let mut buf = [0u8; RING_SAMPLES];
+    if r.is_empty() {
+        return (0.0, 0.0);
+    }
+    let per = 2 * (r.w as u64 + r.h as u64);
+    let step = per.div_ceil(RING_SAMPLES as u64).max(1);
+    let mut n = 0usize;
+    let mut k = 0u64;
+    while k < per && n < RING_SAMPLES {
+        let (x, y) = if k < r.w as u64 {
+            (r.x as u64 + k, r.y as u64)
+        } else if k < 2 * r.w as u64 {
+            (r.x as u64 + k - r.w as u64, r.bottom() as u64 - 1)
+        } else if k < 2 * r.w as u64 + r.h as u64 {
+            (r.x as u64, r.y as u64 + k - 2 * r.w as u64)
+        } else {
+            (
+                r.right() as u64 - 1,
+                r.y as u64 + k - 2 * r.w as u64 - r.h as u64,
+            )
+        };
+        if let Some(v) = img.get(x as usize, y as usize) {
+            if let Some(b) = buf.get_mut(n) {
+                *b = v;
+                n += 1;
+            }
+        }
+        k += step;
+    }
+    let s = buf.get_mut(..n).unwrap_or(&mut []);
+    if s.is_empty() {
+        return (0.0, 0.0);
+    }
+    s.sort_unstable();
+    let med = s.get(n / 2).copied().unwrap_or(0);
+    let mut dev = [0u8; RING_SAMPLES];
+    for (d, v) in dev.iter_mut().zip(s.iter()) {
+        *d = v.abs_diff(med);
+    }
+    let dv = dev.get_mut(..n).unwrap_or(&mut []);
+    dv.sort_unstable();
+    let mad = dv.get(n / 2).copied().unwrap_or(0);
+    (med as f32, 1.4826 * mad as f32)
+}
+
+/// Runs the tail snake beside the end point `end` of an object whose
+/// outward axis direction is `dir` (unit vector), oriented-box height `h_o`,
+/// body mean grey level `body_mean`, background `(bg, bg_sd)`.
+pub fn tail_snake(
+    img: &ImageView<'_>,
+    end: (f32, f32),
+    dir: (f32, f32),
+    h_o: f32,
+    body_mean: f32,
+    bg: (f32, f32),
+    p: &SnakeParams,
+) -> SnakeResult {
+    let nrm = micromath::F32(dir.0 * dir.0 + dir.1 * dir.1).sqrt().0;
+    let (ux, uy) = if nrm > 1e-6 && nrm.is_finite() {
+        (dir.0 / nrm, dir.1 / nrm)
+    } else {
+        (1.0, 0.0)
+    };
+    let h_o = if h_o.is_finite() {
+        h_o.clamp(4.0, 4096.0)
+    } else {
+        4.0
+    };
+    let radius = h_o / 4.0;
+    let (cx, cy) = (end.0 + ux * radius, end.1 + uy * radius);
+    let contrast = (body_mean - bg.0).max(0.0);
+    let level = bg.0 + (p.level_fraction * contrast).max(3.0 * bg.1 / 5.0 + 1.0);
+    let mut pts = [(0.0f32, 0.0f32); SNAKE_POINTS];
+    for (i, q) in pts.iter_mut().enumerate() {
+        let a = i as f32 * core::f32::consts::TAU / SNAKE_POINTS as f32;
+        *q = (
+            cx + radius * micromath::F32(a).cos().0,
+            cy + radius * micromath::F32(a).sin().0,
+        );
+    }
+    let reach = p.reach.clamp(1, 4) as i32;
+    let (w, h) = (img.width() as f32, img.height() as f32);
+    let mut sweeps = 0;
+    for _ in 0..p.iterations.min(1000) {
+        sweeps += 1;
+        let mut moved = 0;
+        // mean spacing d̄
+        let mut per = 0.0;
+        for i in 0..SNAKE_POINTS {
+            let a = pts[i];
+            let b = pts[(i + 1) % SNAKE_POINTS];
+            per += micromath::F32((a.0 - b.0) * (a.0 - b.0) + (a.1 - b.1) * (a.1 - b.1))
+                .sqrt()
+                .0;
+        }
+        let dbar = (per / SNAKE_POINTS as f32).max(0.5);
+        // centroid for the outward normal
+        let (mut gx, mut gy) = (0.0, 0.0);
+        for q in pts.iter() {
+            gx += q.0;
+            gy += q.1;
+        }
+        let (gx, gy) = (gx / SNAKE_POINTS as f32, gy / SNAKE_POINTS as f32);
+        for i in 0..SNAKE_POINTS {
+            let prev = pts[(i + SNAKE_POINTS - 1) % SNAKE_POINTS];
+            let next = pts[(i + 1) % SNAKE_POINTS];
+            let cur = pts[i];
+            // outward normal: perpendicular to the chord, away from the centroid
+            let (tx, ty) = (next.0 - prev.0, next.1 - prev.1);
+            let (mut nx, mut ny) = (ty, -tx);
+            if nx * (cur.0 - gx) + ny * (cur.1 - gy) < 0.0 {
+                nx = -nx;
+                ny = -ny;
+            }
+            let nn = micromath::F32(nx * nx + ny * ny).sqrt().0;
+            if nn > 1e-6 {
+                nx /= nn;
+                ny /= nn;
+            }
+            let mut gmax = 1e-3f32;
+            // (x, y, internal energy, |∇I|, pressure)
+            let mut cand = [(0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32); 81];
+            let mut nc = 0;
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    let q = (cur.0 + dx as f32, cur.1 + dy as f32);
+                    if q.0 < 0.0 || q.1 < 0.0 || q.0 > w - 1.0 || q.1 > h - 1.0 {
+                        continue;
+                    }
+                    // never behind the end (the body side)
+                    if (q.0 - end.0) * ux + (q.1 - end.1) * uy < 0.0 {
+                        continue;
+                    }
+                    let (qx, qy) = (q.0 as i32, q.1 as i32);
+                    let g = grad(img, qx, qy);
+                    gmax = gmax.max(g);
+                    let inside = if smooth(img, qx, qy) >= level {
+                        1.0
+                    } else {
+                        -1.0
+                    };
+                    let push = (dx as f32 * nx + dy as f32 * ny) / reach as f32;
+                    let dc = micromath::F32(
+                        (q.0 - prev.0) * (q.0 - prev.0) + (q.1 - prev.1) * (q.1 - prev.1),
+                    )
+                    .sqrt()
+                    .0;
+                    let cont = (dbar - dc).abs() / dbar;
+                    let (kx, ky) = (prev.0 - 2.0 * q.0 + next.0, prev.1 - 2.0 * q.1 + next.1);
+                    let curv = (kx * kx + ky * ky) / (dbar * dbar);
+                    if let Some(c) = cand.get_mut(nc) {
+                        *c = (
+                            q.0,
+                            q.1,
+                            p.alpha * cont + p.beta * curv,
+                            g,
+                            -p.kappa * inside * push,
+                        );
+                        nc += 1;
+                    }
+                }
+            }
+            let mut best = (f32::INFINITY, cur);
+            for c in cand.iter().take(nc) {
+                let e = c.2 - p.gamma * c.3 / gmax + c.4;
+                if e < best.0 {
+                    best = (e, (c.0, c.1));
+                }
+            }
+            if best.0.is_finite() && best.1 != cur {
+                pts[i] = best.1;
+                moved += 1;
+            }
+        }
+        if moved == 0 {
+            break;
+        }
+    }
+    let mut res = SnakeResult {
+        points: pts,
+        accepted: false,
+        far_t: 0.0,
+        area: 0.0,
+        inside_fraction: 0.0,
+        level,
+        sweeps,
+    };
+    // shoelace area
+    let mut a2 = 0.0;
+    for i in 0..SNAKE_POINTS {
+        let a = pts[i];
+        let b = pts[(i + 1) % SNAKE_POINTS];
+        a2 += a.0 * b.1 - b.0 * a.1;
+    }
+    res.area = (a2 * 0.5).abs();
+    // rasterise the polygon inside its bounding box
+    let (mut x0, mut y0, mut x1, mut y1) = (
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+    );
+    for q in pts.iter() {
+        x0 = x0.min(q.0);
+        y0 = y0.min(q.1);
+        x1 = x1.max(q.0);
+        y1 = y1.max(q.1);
+    }
+    if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite()) {
+        return res;
+    }
+    let (xa, ya) = (x0.max(0.0) as i32, y0.max(0.0) as i32);
+    let (xb, yb) = (x1.min(w - 1.0) as i32, y1.min(h - 1.0) as i32);
+    let mut n_in = 0u32;
+    let mut n_hi = 0u32;
+    let mut far = f32::NEG_INFINITY;
+    let mut near = f32::INFINITY;
+    for y in ya..=yb {
+        for x in xa..=xb {
+            if !point_in_polygon(&pts, x as f32, y as f32) {
+                continue;
+            }
+            n_in += 1;
+            let t = (x as f32 - end.0) * ux + (y as f32 - end.1) * uy;
+            if smooth(img, x, y) >= level {
+                n_hi += 1;
+                far = far.max(t);
+                near = near.min(t);
+            }
+        }
+    }
+    if n_in == 0 {
+        return res;
+    }
+    res.inside_fraction = n_hi as f32 / n_in as f32;
+    let min_area = 0.25 * radius * radius * core::f32::consts::PI;
+    res.accepted = res.area >= min_area
+        && res.inside_fraction >= 0.6
+        && near <= radius
+        && far.is_finite()
+        && far > 1.0;
+    if res.accepted {
+        res.far_t = far;
+    }
+    res
+}
+
+/// Even–odd rule point-in-polygon test.
+fn point_in_polygon(pts: &[(f32, f32); SNAKE_POINTS], x: f32, y: f32) -> bool {
+    let mut inside = false;
+    let mut j = SNAKE_POINTS - 1;
+    for i in 0..SNAKE_POINTS {
+        let (xi, yi) = pts[i];
+        let (xj, yj) = pts[j];
+        if (yi > y) != (yj > y) {
+            let xc = xj + (y - yj) * (xi - xj) / (yi - yj);
+            if x < xc {
+                inside = !inside;
+            }
+        }
+        j = i;
+    }
+    inside
+}

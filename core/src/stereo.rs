@@ -1,0 +1,674 @@
+//! Stereo pairing with object-height blocks (Section IV.A, Fig. 7).
+//!
+//! Each left object's upright box is split into 4 non-overlapping blocks
+//! side by side ([`object_height_blocks`]: block height = box height, width =
+//! box width / 4). In rectified frames corresponding rows are equal, so a
+//! block is compared only with the 4 blocks of every right object whose rows
+//! overlap it (same epipolar band), by the sum of absolute differences (SAD)
+//! over the shared rows, normalised per pixel so that objects of different
+//! sizes compare. The right object with the least sum of the 4 minimum block
+//! SADs is the pair; `μ_SAD` (eq. 15) is the average of those 4 minima.
+//!
+//! Beyond the paper:
+//! - Candidates are gated for plausibility ([`PairingLimits`]): row overlap,
+//!   size ratio (not along a side where an object is cut by the frame
+//!   border), disparity within the range the geometry allows between
+//!   `min_range_mm` and `max_range_mm` (negative or too-large shifts are never
+//!   evaluated), and `μ_SAD` per pixel. A left object with no plausible
+//!   candidate stays unpaired rather than being mis-paired.
+//! - Pairing is one-to-one: an optimal assignment (shortest augmenting path,
+//!   Jonker–Volgenant style) over the `μ_SAD` cost matrix maximises the number
+//!   of plausible pairs, then minimises the summed cost. Occlusion exception:
+//!   a left object left out by the assignment may share its best right object
+//!   with the left object assigned to it when that right box covers ≥ 90 % of
+//!   both left boxes shifted by their disparities (two fish merged into one
+//!   blob in the right view); such pairs are flagged `occluded`.
+//! - The coarse disparity `d_o` is the candidate (the 4 block disparities and
+//!   the two box-edge alignments) with the least whole-box SAD per pixel, so a
+//!   box cut by the frame border or cropped at one end still gets the
+//!   disparity of its visible part.
+//!
+//! Cost: a candidate costs `16 · (w/4) · h = 4·w·h` absolute differences plus
+//! ≤ 6 whole-box evaluations for `d_o`; [`PairingStats::sad_ops`] counts them,
+//! [`dense_sad_ops`] gives the dense block-matching figure to compare with.
+//! Memory bound: the cost matrix `N² · 4` bytes and `O(N)` work arrays on the
+//! stack (the chosen pairs' block matches are recomputed, not stored); no heap.
+
+use crate::error::ImageError;
+use crate::geometry::StereoGeometry;
+use crate::image::{ImageView, Roi};
+use crate::object::Objects;
+
+/// Number of object-height blocks per object (Fig. 7).
+pub const BLOCKS: usize = 4;
+
+/// Cost given to implausible pairs in the assignment (never selected as a pair).
+const NO_PAIR: f32 = 1.0e6;
+
+/// Plausibility gate of a left/right candidate pair.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PairingLimits {
+    /// Nearest plausible range of a fish, mm: gives the largest disparity.
+    pub min_range_mm: f32,
+    /// Farthest plausible range, mm: gives the smallest disparity.
+    pub max_range_mm: f32,
+    /// Disparity slack, pixels, around that range (rectification error, box jitter).
+    pub disparity_slack: f32,
+    /// Minimum shared rows as a fraction of the smaller box height.
+    pub min_row_overlap: f32,
+    /// Minimum ratio smaller/larger of box widths and of box heights (not
+    /// applied along an axis where a box touches the frame border).
+    pub min_size_ratio: f32,
+    /// Largest acceptable `μ_SAD`, grey levels per pixel.
+    pub max_sad_per_pixel: f32,
+}
+
+impl Default for PairingLimits {
+    fn default() -> Self {
+        PairingLimits {
+            min_range_mm: 500.0,
+            max_range_mm: 20_000.0,
+            disparity_slack: 8.0,
+            min_row_overlap: 0.6,
+            min_size_ratio: 0.5,
+            max_sad_per_pixel: 40.0,
+        }
+    }
+}
+
+impl PairingLimits {
+    /// Disparity interval `[d_min, d_max]` (slack included) allowed by `geom`.
+    pub fn disparity_range(&self, geom: &StereoGeometry) -> (f32, f32) {
+        let lo = geom.disparity_at_depth(self.max_range_mm) - self.disparity_slack;
+        let hi = geom.disparity_at_depth(self.min_range_mm) + self.disparity_slack;
+        (lo, hi)
+    }
+}
+
+/// One stereo-corresponding object pair.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StereoPair {
+    /// Index into the left [`Objects::items`].
+    pub left: u16,
+    /// Index into the right [`Objects::items`].
+    pub right: u16,
+    /// Coarse disparity `d_o`, pixels (`x_left − x_right`).
+    pub d_o: f32,
+    /// `μ_SAD`: mean of the 4 minimum block SADs, grey levels per pixel (eq. 15).
+    pub mu_sad: f32,
+    /// Disparity of each left block's best right block.
+    pub block_disparity: [f32; BLOCKS],
+    /// True when this pair shares its right object with another pair (occlusion).
+    pub occluded: bool,
+}
+
+/// Counters of one pairing run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PairingStats {
+    /// Left/right candidates evaluated by block SAD.
+    pub candidates: u32,
+    /// Candidates rejected by the plausibility gate after evaluation.
+    pub rejected: u32,
+    /// Absolute differences computed (the "SAD operations").
+    pub sad_ops: u64,
+    /// Left objects left unpaired.
+    pub unpaired_left: u32,
+    /// Pairs accepted through the occlusion exception.
+    pub occlusions: u32,
+}
+
+/// The pairs of one frame.
+#[derive(Debug, Clone, Default)]
+pub struct StereoPairs<const N: usize> {
+    /// The pairs, ordered by left index.
+    pub pairs: heapless::Vec<StereoPair, N>,
+    /// Counters.
+    pub stats: PairingStats,
+}
+
+/// The 4 object-height blocks of an upright box (Fig. 7): full box height,
+/// width `w/4` (the remainder spread so the blocks tile the box exactly).
+pub fn object_height_blocks(bbox: Roi) -> [Roi; BLOCKS] {
+    let mut out = [Roi::default(); BLOCKS];
+    let w = bbox.w as u64;
+    for (k, b) in out.iter_mut().enumerate() {
+        let x0 = (k as u64 * w / BLOCKS as u64) as u32;
+        let x1 = ((k as u64 + 1) * w / BLOCKS as u64) as u32;
+        *b = Roi::new(bbox.x.saturating_add(x0), bbox.y, x1 - x0, bbox.h);
+    }
+    out
+}
+
+/// Absolute differences of dense block matching over a whole `width × height`
+/// frame with `num_disparities` candidate disparities: every pixel's
+/// difference at every disparity is computed at least once (box filtering
+/// aggregates them), so this is a lower bound for dense SAD stereo.
+pub const fn dense_sad_ops(width: u64, height: u64, num_disparities: u64) -> u64 {
+    width * height * num_disparities
+}
+
+/// SAD per pixel between left pixels `[x0, x1) × [y0, y1)` and the right
+/// image shifted by `−d` (right column = left column − d). Pixels whose right
+/// column falls outside the image are skipped; `None` when fewer than half of
+/// the pixels could be compared.
+#[allow(clippy::too_many_arguments)]
+pub fn sad_per_pixel(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+    d: i32,
+    ops: &mut u64,
+) -> Option<f32> {
+    let w = right.width() as i64;
+    let x1 = x1.min(left.width() as u32);
+    let y1 = y1.min(left.height() as u32).min(right.height() as u32);
+    if x1 <= x0 || y1 <= y0 {
+        return None;
+    }
+    // columns whose right counterpart lies inside the right image
+    let lo = (x0 as i64).max(d as i64);
+    let hi = (x1 as i64).min(w + d as i64);
+    let total = (x1 - x0) as u64 * (y1 - y0) as u64;
+    if hi <= lo {
+        return None;
+    }
+    let (lo, hi) = (lo as usize, hi as usize);
+    let (rlo, rhi) = (
+        (lo as i64 - d as i64) as usize,
+        (hi as i64 - d as i64) as usize,
+    );
+    let mut sum: u64 = 0;
+    let mut n: u64 = 0;
+    for y in y0 as usize..y1 as usize {
+        let (Some(a), Some(b)) = (left.row(y).get(lo..hi), right.row(y).get(rlo..rhi)) else {
+            continue;
+        };
+        let mut s: u32 = 0;
+        for (p, q) in a.iter().zip(b) {
+            s += p.abs_diff(*q) as u32;
+        }
+        sum += s as u64;
+        n += a.len() as u64;
+    }
+    *ops += n;
+    if n == 0 || 2 * n < total {
+        return None;
+    }
+    Some(sum as f32 / n as f32)
+}
+
+/// Result of matching one left box against one right box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BlockMatch {
+    /// `μ_SAD`, grey levels per pixel.
+    pub mu_sad: f32,
+    /// Disparity of each left block's best right block.
+    pub block_disparity: [f32; BLOCKS],
+    /// Coarse disparity `d_o`.
+    pub d_o: f32,
+}
+
+fn touches_x(b: &Roi, width: u32) -> bool {
+    b.x == 0 || b.right() >= width
+}
+
+fn touches_y(b: &Roi, height: u32) -> bool {
+    b.y == 0 || b.bottom() >= height
+}
+
+fn ratio(a: u32, b: u32) -> f32 {
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    if hi == 0 {
+        0.0
+    } else {
+        lo as f32 / hi as f32
+    }
+}
+
+/// Geometric gate applied before any SAD is computed.
+fn shapes_compatible(lb: &Roi, rb: &Roi, w: u32, h: u32, lim: &PairingLimits) -> bool {
+    let y0 = lb.y.max(rb.y);
+    let y1 = lb.bottom().min(rb.bottom());
+    if y1 <= y0 {
+        return false;
+    }
+    let overlap = (y1 - y0) as f32 / lb.h.min(rb.h).max(1) as f32;
+    if overlap < lim.min_row_overlap {
+        return false;
+    }
+    let cut_x = touches_x(lb, w) || touches_x(rb, w);
+    let cut_y = touches_y(lb, h) || touches_y(rb, h);
+    if !cut_x && ratio(lb.w, rb.w) < lim.min_size_ratio {
+        return false;
+    }
+    if !cut_y && ratio(lb.h, rb.h) < lim.min_size_ratio {
+        return false;
+    }
+    true
+}
+
+/// Object-height block matching of one left box against one right box
+/// (Section IV.A) over their shared rows; `None` when no block pair lies in
+/// the allowed disparity interval `[d_lo, d_hi]`.
+pub fn match_boxes(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    lb: Roi,
+    rb: Roi,
+    d_lo: f32,
+    d_hi: f32,
+    ops: &mut u64,
+) -> Option<BlockMatch> {
+    let y0 = lb.y.max(rb.y);
+    let y1 = lb.bottom().min(rb.bottom());
+    if y1 <= y0 {
+        return None;
+    }
+    let lblocks = object_height_blocks(lb);
+    let rblocks = object_height_blocks(rb);
+    let mut mins = [f32::INFINITY; BLOCKS];
+    let mut disp = [0.0f32; BLOCKS];
+    for (k, l) in lblocks.iter().enumerate() {
+        if l.w == 0 {
+            continue;
+        }
+        for r in rblocks.iter() {
+            if r.w == 0 {
+                continue;
+            }
+            let d = l.x as i32 - r.x as i32;
+            if (d as f32) < d_lo || (d as f32) > d_hi {
+                continue;
+            }
+            if let Some(s) = sad_per_pixel(left, right, l.x, l.right(), y0, y1, d, ops) {
+                if s < mins[k] {
+                    mins[k] = s;
+                    disp[k] = d as f32;
+                }
+            }
+        }
+    }
+    let mut n = 0;
+    let mut sum = 0.0;
+    for m in mins.iter().filter(|m| m.is_finite()) {
+        sum += *m;
+        n += 1;
+    }
+    if n == 0 {
+        return None;
+    }
+    // blocks that found nothing inherit the mean disparity of the others
+    let mut dsum = 0.0;
+    for k in 0..BLOCKS {
+        if mins[k].is_finite() {
+            dsum += disp[k];
+        }
+    }
+    let dmean = dsum / n as f32;
+    for k in 0..BLOCKS {
+        if !mins[k].is_finite() {
+            disp[k] = dmean;
+        }
+    }
+    // coarse disparity: the candidate with the least whole-box SAD
+    let cands = [
+        disp[0],
+        disp[1],
+        disp[2],
+        disp[3],
+        lb.x as f32 - rb.x as f32,
+        lb.right() as f32 - rb.right() as f32,
+    ];
+    let mut best = (f32::INFINITY, dmean);
+    for c in cands {
+        if c < d_lo || c > d_hi {
+            continue;
+        }
+        if let Some(s) = sad_per_pixel(left, right, lb.x, lb.right(), y0, y1, c as i32, ops) {
+            if s < best.0 {
+                best = (s, c);
+            }
+        }
+    }
+    Some(BlockMatch {
+        mu_sad: sum / n as f32,
+        block_disparity: disp,
+        d_o: best.1,
+    })
+}
+
+/// Fraction of `a` covered by `b`.
+fn covered(a: &Roi, b: &Roi) -> f32 {
+    let i = a.intersect(b).area();
+    if a.area() == 0 {
+        0.0
+    } else {
+        i as f32 / a.area() as f32
+    }
+}
+
+/// `b` shifted left by `d` pixels (clamped at 0).
+fn shifted(b: &Roi, d: f32) -> Roi {
+    let x = b.x as f32 - d;
+    let x = if x > 0.0 { x as u32 } else { 0 };
+    Roi::new(x, b.y, b.w, b.h)
+}
+
+/// Pairs left objects with right objects (Section IV.A), one-to-one with
+/// the occlusion exception described in the module documentation.
+///
+/// Errors when the two frames differ in size.
+pub fn pair_objects<const N: usize, const R: usize>(
+    left_img: &ImageView<'_>,
+    right_img: &ImageView<'_>,
+    left: &Objects<N, R>,
+    right: &Objects<N, R>,
+    geom: &StereoGeometry,
+    limits: &PairingLimits,
+) -> Result<StereoPairs<N>, ImageError> {
+    if left_img.width() != right_img.width() || left_img.height() != right_img.height() {
+        return Err(ImageError::SizeMismatch);
+    }
+    let (w, h) = (left_img.width() as u32, left_img.height() as u32);
+    let (d_lo, d_hi) = limits.disparity_range(geom);
+    let nl = left.items.len().min(N);
+    let nr = right.items.len().min(N);
+    let mut out = StereoPairs::<N>::default();
+    let mut cost = [[NO_PAIR; N]; N];
+    for (i, lo) in left.items.iter().enumerate().take(nl) {
+        for (j, ro) in right.items.iter().enumerate().take(nr) {
+            let (lb, rb) = (lo.bbox, ro.bbox);
+            if lb.is_empty() || rb.is_empty() || !shapes_compatible(&lb, &rb, w, h, limits) {
+                continue;
+            }
+            // every block pair's disparity lies in [lb.x − rb.right(), lb.right() − rb.x]
+            let dmax_possible = lb.right() as f32 - rb.x as f32;
+            let dmin_possible = lb.x as f32 - rb.right() as f32;
+            if dmax_possible < d_lo || dmin_possible > d_hi {
+                continue;
+            }
+            out.stats.candidates += 1;
+            let m = match_boxes(
+                left_img,
+                right_img,
+                lb,
+                rb,
+                d_lo,
+                d_hi,
+                &mut out.stats.sad_ops,
+            );
+            match m {
+                Some(m) if m.mu_sad <= limits.max_sad_per_pixel => {
+                    if let Some(c) = cost.get_mut(i).and_then(|row| row.get_mut(j)) {
+                        *c = m.mu_sad;
+                    }
+                }
+                _ => out.stats.rejected += 1,
+            }
+        }
+    }
+    // the few chosen matches are recomputed rather than stored (N² of them)
+    let rematch = |i: usize, j: usize| -> Option<BlockMatch> {
+        let plausible = cost
+            .get(i)
+            .and_then(|r| r.get(j))
+            .is_some_and(|c| *c < NO_PAIR);
+        let (lo, ro) = (left.items.get(i)?, right.items.get(j)?);
+        let mut scratch = 0u64;
+        if !plausible {
+            return None;
+        }
+        match_boxes(
+            left_img,
+            right_img,
+            lo.bbox,
+            ro.bbox,
+            d_lo,
+            d_hi,
+            &mut scratch,
+        )
+    };
+    let n = nl.max(nr);
+    let mut col4row = [usize::MAX; N];
+    solve_assignment(&cost, n, &mut col4row);
+    let mut taken_by = [usize::MAX; N];
+    for i in 0..nl {
+        let j = col4row.get(i).copied().unwrap_or(usize::MAX);
+        let m = rematch(i, j);
+        if let (Some(m), Some(t)) = (m, taken_by.get_mut(j)) {
+            *t = i;
+            let _ = out.pairs.push(StereoPair {
+                left: i as u16,
+                right: j as u16,
+                d_o: m.d_o,
+                mu_sad: m.mu_sad,
+                block_disparity: m.block_disparity,
+                occluded: false,
+            });
+        }
+    }
+    // occlusion exception for left objects the assignment left out
+    for i in 0..nl {
+        if out.pairs.iter().any(|p| p.left as usize == i) {
+            continue;
+        }
+        let Some(row) = cost.get(i) else { continue };
+        let mut best: Option<(usize, f32)> = None;
+        for (j, c) in row.iter().enumerate().take(nr) {
+            if *c < NO_PAIR && best.map(|(_, b)| *c < b).unwrap_or(true) {
+                best = Some((j, *c));
+            }
+        }
+        let Some((j, m)) = best.and_then(|(j, _)| Some((j, rematch(i, j)?))) else {
+            out.stats.unpaired_left += 1;
+            continue;
+        };
+        let other = taken_by.get(j).copied().unwrap_or(usize::MAX);
+        let (Some(lo), Some(ro)) = (left.items.get(i), right.items.get(j)) else {
+            continue;
+        };
+        let other_pair = out.pairs.iter().find(|p| p.left as usize == other).copied();
+        let ok = match (other_pair, left.items.get(other)) {
+            (Some(op), Some(oo)) => {
+                covered(&shifted(&lo.bbox, m.d_o), &ro.bbox) >= 0.9
+                    && covered(&shifted(&oo.bbox, op.d_o), &ro.bbox) >= 0.9
+            }
+            _ => false,
+        };
+        if ok {
+            out.stats.occlusions += 1;
+            let _ = out.pairs.push(StereoPair {
+                left: i as u16,
+                right: j as u16,
+                d_o: m.d_o,
+                mu_sad: m.mu_sad,
+                block_disparity: m.block_disparity,
+                occluded: true,
+            });
+        } else {
+            out.stats.unpaired_left += 1;
+        }
+    }
+    out.pairs.sort_unstable_by_key(|p| p.left);
+    Ok(out)
+}
+
+/// Minimum-cost assignment of the leading `n × n` part of `cost` (rows to
+/// columns), by shortest augmenting paths with dual potentials (the
+/// Jonker–Volgenant / Crouse formulation used by SciPy's
+/// `linear_sum_assignment`). Writes `col4row`. Work: `O(n³)`.
+///
+/// Every index below is `< n ≤ N` by construction (rows and columns come
+/// from `0..n` or from the arrays this function fills), so indexing cannot
+/// fail whatever the costs are.
+#[allow(clippy::needless_range_loop)]
+pub fn solve_assignment<const N: usize>(cost: &[[f32; N]; N], n: usize, col4row: &mut [usize; N]) {
+    let n = n.min(N);
+    let mut u = [0.0f64; N];
+    let mut v = [0.0f64; N];
+    let mut row4col = [usize::MAX; N];
+    let mut path = [usize::MAX; N];
+    let mut spc = [f64::INFINITY; N];
+    let mut sr = [false; N];
+    let mut sc = [false; N];
+    let mut remaining = [0usize; N];
+    col4row.iter_mut().for_each(|c| *c = usize::MAX);
+    let c = |i: usize, j: usize| -> f64 {
+        cost.get(i)
+            .and_then(|r| r.get(j))
+            .copied()
+            .unwrap_or(NO_PAIR) as f64
+    };
+    for cur in 0..n {
+        // --- shortest augmenting path from row `cur`
+        let mut min_val = 0.0f64;
+        let mut num_remaining = n;
+        for (it, r) in remaining.iter_mut().enumerate().take(n) {
+            *r = n - it - 1;
+        }
+        sr.iter_mut().for_each(|s| *s = false);
+        sc.iter_mut().for_each(|s| *s = false);
+        spc.iter_mut().for_each(|s| *s = f64::INFINITY);
+        let mut i = cur;
+        let mut sink = usize::MAX;
+        let mut guard = 0;
+        while sink == usize::MAX && guard <= n {
+            guard += 1;
+            let mut index = usize::MAX;
+            let mut lowest = f64::INFINITY;
+            sr[i] = true;
+            for it in 0..num_remaining {
+                let j = remaining[it];
+                let r = min_val + c(i, j) - u[i] - v[j];
+                if r < spc[j] {
+                    path[j] = i;
+                    spc[j] = r;
+                }
+                let sj = spc[j];
+                if sj < lowest || (sj == lowest && row4col[j] == usize::MAX) {
+                    lowest = sj;
+                    index = it;
+                }
+            }
+            if index == usize::MAX || !lowest.is_finite() {
+                return;
+            }
+            min_val = lowest;
+            let j = remaining[index];
+            if row4col[j] == usize::MAX {
+                sink = j;
+            } else {
+                i = row4col[j];
+            }
+            sc[j] = true;
+            num_remaining -= 1;
+            remaining[index] = remaining[num_remaining];
+        }
+        if sink == usize::MAX {
+            return;
+        }
+        // --- update the dual variables
+        u[cur] += min_val;
+        for r in 0..n {
+            if sr[r] && r != cur {
+                u[r] += min_val - spc[col4row[r]];
+            }
+        }
+        for j in 0..n {
+            if sc[j] {
+                v[j] -= min_val - spc[j];
+            }
+        }
+        // --- augment along the path
+        let mut j = sink;
+        for _ in 0..=n {
+            let Some(&i) = path.get(j) else { break };
+            if let Some(r) = row4col.get_mut(j) {
+                *r = i;
+            }
+            let Some(slot) = col4row.get_mut(i) else {
+                break;
+            };
+            core::mem::swap(slot, &mut j);
+            if i == cur {
+                break;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blocks_tile_the_box() {
+        let b = Roi::new(10, 20, 103, 30);
+        let bl = object_height_blocks(b);
+        assert_eq!(bl[0].x, 10);
+        assert_eq!(bl[3].right(), 113);
+        for k in 0..3 {
+            assert_eq!(bl[k].right(), bl[k + 1].x);
+            assert_eq!(bl[k].h, 30);
+        }
+        let total: u32 = bl.iter().map(|r| r.w).sum();
+        assert_eq!(total, 103);
+    }
+
+    #[test]
+    fn assignment_is_optimal_on_small_matrices() {
+        // brute force over permutations of 4
+        let mut seed = 12345u32;
+        for _ in 0..200 {
+            let mut cost = [[0.0f32; 4]; 4];
+            for r in cost.iter_mut() {
+                for c in r.iter_mut() {
+                    seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+                    *c = (seed >> 16) as f32 / 655.36;
+                }
+            }
+            let mut col = [0usize; 4];
+            solve_assignment(&cost, 4, &mut col);
+            let got: f32 = (0..4).map(|i| cost[i][col[i]]).sum();
+            let mut best = f32::INFINITY;
+            let perms = permutations4();
+            for p in perms.iter() {
+                let s: f32 = (0..4).map(|i| cost[i][p[i]]).sum();
+                best = best.min(s);
+            }
+            assert!((got - best).abs() < 1e-3, "{got} vs {best}");
+            let mut seen = [false; 4];
+            for c in col {
+                assert!(!seen[c]);
+                seen[c] = true;
+            }
+        }
+    }
+
+    fn permutations4() -> Vec<[usize; 4]> {
+        let mut v = Vec::new();
+        for a in 0..4 {
+            for b in 0..4 {
+                for c in 0..4 {
+                    for d in 0..4 {
+                        let p = [a, b, c, d];
+                        let mut s = [false; 4];
+                        p.iter().for_each(|&x| s[x] = true);
+                        if s.iter().all(|&x| x) {
+                            v.push(p);
+                        }
+                    }
+                }
+            }
+        }
+        v
+    }
+}

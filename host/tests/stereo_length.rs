@@ -1,0 +1,377 @@
+//! Stereo pairing (Section IV.A) and 3-D length (Section IV.D) of the core
+//! on rendered synthetic stereo pairs with known 3-D fish.
+//!
+//! Run with `--nocapture` to see the figures.
+
+mod stereo_scene;
+
+use fishtrack_core::length::{measure_length, LengthConfig};
+use fishtrack_core::stereo::{pair_objects, PairingLimits};
+use fishtrack_core::{ImageView, Params};
+use stereo_scene::*;
+
+fn objects(img: &[u8], masks: &[&Vec<bool>], w: usize, h: usize) -> Objs {
+    let mut o = Objs::new();
+    for m in masks {
+        push_object(&mut o, img, m, w, h);
+    }
+    o
+}
+
+#[test]
+fn pairing_with_swapped_order_distractor_border_cut_and_no_match() {
+    let sc = Scene::new(1024, 640);
+    let a = fish_at(-380.0, -150.0, 1600.0, [1.0, 0.1, 0.15], 280.0, 110.0, 1);
+    let b = fish_at(-150.0, 70.0, 2200.0, [1.0, -0.05, -0.1], 350.0, 110.0, 2);
+    let c = fish_at(-150.0, -30.0, 1300.0, [1.0, 0.2, 0.0], 250.0, 110.0, 3);
+    // cut by the right border in the left view, whole in the right view
+    let e = fish_at(560.0, 200.0, 1500.0, [1.0, 0.0, 0.0], 300.0, 110.0, 5);
+    // only in the left view (no match), same band as b
+    let d = fish_at(-420.0, 90.0, 2400.0, [1.0, 0.0, 0.1], 300.0, 110.0, 4);
+    // only in the right view: a distractor on a's band, different texture
+    let f = fish_at(-50.0, -160.0, 1700.0, [1.0, 0.05, 0.0], 280.0, 110.0, 99);
+    let with_left = render(&sc, &[a, b, c, e, d]);
+    let with_right = render(&sc, &[a, b, c, e, f]);
+    let (w, h) = (sc.w, sc.h);
+    let m = |r: &Rendered, k: usize, v: usize| r.masks[k][v].clone();
+    // left: a b c e d (full masks, view 0 → index 1)
+    let lm: Vec<Vec<bool>> = (0..5).map(|k| m(&with_left, k, 1)).collect();
+    // right, swapped order: f e c b a (view 1 → index 3)
+    let rm: Vec<Vec<bool>> = [4, 3, 2, 1, 0]
+        .iter()
+        .map(|&k| m(&with_right, k, 3))
+        .collect();
+    let left = objects(&with_left.left, &lm.iter().collect::<Vec<_>>(), w, h);
+    let right = objects(&with_right.right, &rm.iter().collect::<Vec<_>>(), w, h);
+    assert!(
+        left.items[3].bbox.right() as usize == w,
+        "e must be cut by the border in the left view"
+    );
+    let lv = ImageView::packed(&with_left.left, w, h).unwrap();
+    let rv = ImageView::packed(&with_right.right, w, h).unwrap();
+    let geom = sc.geometry();
+    let out = pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
+    let got: Vec<(u16, u16)> = out.pairs.iter().map(|p| (p.left, p.right)).collect();
+    println!("pairs (left, right): {got:?}; stats {:?}", out.stats);
+    for p in out.pairs.iter() {
+        println!("  pair {:?}", p);
+    }
+    // a→4, b→3, c→2, e→1; d unpaired; f (right 0) unused
+    assert_eq!(got, vec![(0, 4), (1, 3), (2, 2), (3, 1)]);
+    assert_eq!(out.stats.unpaired_left, 1);
+    // coarse disparity within a few pixels of the truth at the box centre
+    for (p, fish) in out.pairs.iter().zip([a, b, c, e]) {
+        let zc = 0.5 * (fish.head[2] + fish.tail[2]);
+        let d_true = sc.f * sc.baseline / zc;
+        let tol = 0.5 * (sc.project(fish.head).2 - sc.project(fish.tail).2).abs() + 3.0;
+        assert!(
+            (p.d_o as f64 - d_true).abs() <= tol,
+            "d_o {} vs {d_true}",
+            p.d_o
+        );
+    }
+    // dense block matching over the frame would cost this many absolute differences
+    let dense = fishtrack_core::stereo::dense_sad_ops(w as u64, h as u64, 256);
+    println!(
+        "SAD ops: object-height blocks {} vs dense {} (×{:.0})",
+        out.stats.sad_ops,
+        dense,
+        dense as f64 / out.stats.sad_ops as f64
+    );
+    assert!(dense >= 50 * out.stats.sad_ops);
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Seg {
+    /// Both views include the tail.
+    Full,
+    /// Left crops the tail, right keeps it.
+    LeftCropped,
+    /// Both views crop the tail.
+    BothCropped,
+}
+
+fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool, noise: f64) -> (f64, bool) {
+    let mut sc = Scene::new(1024, 640);
+    sc.noise = noise;
+    let r = render(&sc, &[fish]);
+    let (w, h) = (sc.w, sc.h);
+    let (lmask, rmask) = match seg {
+        Seg::Full => (&r.masks[0][1], &r.masks[0][3]),
+        Seg::LeftCropped => (&r.masks[0][0], &r.masks[0][3]),
+        Seg::BothCropped => (&r.masks[0][0], &r.masks[0][2]),
+    };
+    let left = objects(&r.left, &[lmask], w, h);
+    let right = objects(&r.right, &[rmask], w, h);
+    let lv = ImageView::packed(&r.left, w, h).unwrap();
+    let rv = ImageView::packed(&r.right, w, h).unwrap();
+    let geom = sc.geometry();
+    let pairs = pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
+    assert_eq!(pairs.pairs.len(), 1, "{fish:?} {seg:?}");
+    let params = Params {
+        tail_compensation: comp,
+        ..Params::default()
+    };
+    let cfg = LengthConfig {
+        snake_every_end: every_end,
+        ..LengthConfig::default()
+    };
+    let l = measure_length::<N, R, 1024>(
+        &lv,
+        &rv,
+        &left,
+        &right,
+        &pairs.pairs[0],
+        &geom,
+        &params,
+        &cfg,
+    )
+    .unwrap();
+    let truth = fish.length();
+    if std::env::var("STEREO_DEBUG").is_ok() {
+        let (hx, hy, hd) = sc.project(fish.head);
+        let (tx, ty, td) = sc.project(fish.tail);
+        println!("truth head ({hx:.1},{hy:.1},d {hd:.2}) tail ({tx:.1},{ty:.1},d {td:.2}); pair {:?}\n  got {l:?}", pairs.pairs[0]);
+    }
+    let err = (l.length_mm as f64 - truth) / truth * 100.0;
+    let comped = l.ends.iter().any(|e| e.compensated);
+    if comp && !every_end {
+        println!(
+            "   eq15 SAD ratios {:.2} {:.2}",
+            l.ends[0].sad_ratio, l.ends[1].sad_ratio
+        );
+    }
+    (err, comped)
+}
+
+fn poses(tail_grey: f64) -> Vec<Fish> {
+    vec![
+        fish_at(-150.0, -20.0, 1500.0, [1.0, 0.0, 0.0], 300.0, tail_grey, 11),
+        fish_at(-200.0, 40.0, 1800.0, [1.0, 0.15, 0.3], 320.0, tail_grey, 12),
+        fish_at(
+            -100.0,
+            -60.0,
+            1300.0,
+            [1.0, -0.25, -0.2],
+            240.0,
+            tail_grey,
+            13,
+        ),
+        fish_at(-250.0, 0.0, 2200.0, [1.0, 0.05, 0.5], 400.0, tail_grey, 14),
+        // head on the right (swimming the other way), tilted
+        fish_at(150.0, 30.0, 1600.0, [-1.0, 0.3, 0.1], 280.0, tail_grey, 15),
+    ]
+}
+
+#[test]
+fn length_with_and_without_tail_compensation() {
+    for noise in [4.0, 8.0] {
+        println!("noise σ {noise}: fish | seg | comp off % | comp eq15 % | comp every end %");
+        let mut worst_bright = 0.0f64;
+        let mut worst_dim_asym = 0.0f64;
+        let mut worst_dim_sym_every = 0.0f64;
+        let mut sum_off = 0.0;
+        let mut sum_on = 0.0;
+        let mut n_dim = 0.0;
+        for (grey, segs) in [
+            (110.0, vec![Seg::Full]),
+            (48.0, vec![Seg::LeftCropped, Seg::BothCropped]),
+        ] {
+            for (i, fish) in poses(grey).into_iter().enumerate() {
+                for &seg in &segs {
+                    let (off, _) = length_error(fish, seg, false, false, noise);
+                    let (on, c_on) = length_error(fish, seg, true, false, noise);
+                    let (every, c_every) = length_error(fish, seg, true, true, noise);
+                    println!(
+                        "{i} tail {grey} | {seg:?} | {off:+.2} | {on:+.2}{} | {every:+.2}{}",
+                        if c_on { " (snake)" } else { "" },
+                        if c_every { " (snake)" } else { "" }
+                    );
+                    match seg {
+                        Seg::Full => {
+                            worst_bright =
+                                worst_bright.max(off.abs()).max(on.abs()).max(every.abs());
+                            // compensation must not hurt fish whose tail is whole
+                            assert!(
+                                on.abs() <= off.abs() + 0.5,
+                                "comp hurt fish {i}: {off} → {on}"
+                            );
+                            assert!(
+                                every.abs() <= off.abs() + 1.0,
+                                "every-end hurt fish {i}: {off} → {every}"
+                            );
+                        }
+                        Seg::LeftCropped => {
+                            worst_dim_asym = worst_dim_asym.max(on.abs());
+                            sum_off += off.abs();
+                            sum_on += on.abs();
+                            n_dim += 1.0;
+                            assert!(
+                                on.abs() < off.abs(),
+                                "comp did not help fish {i}: {off} → {on}"
+                            );
+                        }
+                        Seg::BothCropped => {
+                            worst_dim_sym_every = worst_dim_sym_every.max(every.abs());
+                            assert!(
+                                every.abs() < off.abs(),
+                                "every-end did not help fish {i}: {off} → {every}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        println!(
+        "worst |err|: whole tails {worst_bright:.2} %, dim tail cropped in left view (eq15 snake) {worst_dim_asym:.2} %, \
+         dim tail cropped in both views (every-end snake) {worst_dim_sym_every:.2} %; \
+         mean |err| dim/left-cropped off {:.2} % on {:.2} %",
+        sum_off / n_dim,
+        sum_on / n_dim
+    );
+        assert!(worst_bright < 3.0);
+        assert!(worst_dim_asym < 5.0);
+        assert!(worst_dim_sym_every < 5.0);
+    }
+}
+
+/// The core against the f64 reference (`fishtrack::reference_stereo`):
+/// identical pairs, lengths within 0.5 %, on the pairing scene and on every
+/// length scene (tail compensation on, eq. 15 and every-end modes).
+#[test]
+fn core_agrees_with_the_f64_reference() {
+    use fishtrack::reference_stereo as rs;
+    let sc = Scene::new(1024, 640);
+    let mut scenes: Vec<(Vec<Fish>, Seg)> = vec![(
+        vec![
+            fish_at(-380.0, -150.0, 1600.0, [1.0, 0.1, 0.15], 280.0, 110.0, 1),
+            fish_at(-150.0, 70.0, 2200.0, [1.0, -0.05, -0.1], 350.0, 110.0, 2),
+            fish_at(-150.0, -30.0, 1300.0, [1.0, 0.2, 0.0], 250.0, 110.0, 3),
+            fish_at(560.0, 200.0, 1500.0, [1.0, 0.0, 0.0], 300.0, 110.0, 5),
+        ],
+        Seg::Full,
+    )];
+    for f in poses(110.0) {
+        scenes.push((vec![f], Seg::Full));
+    }
+    for f in poses(48.0) {
+        scenes.push((vec![f], Seg::LeftCropped));
+        scenes.push((vec![f], Seg::BothCropped));
+    }
+    let geom = sc.geometry();
+    let rgeom = rs::Geometry::from_core(&geom);
+    let limits = PairingLimits::default();
+    let params = Params::default();
+    let mut worst = 0.0f64;
+    let mut n_pairs = 0;
+    for every_end in [false, true] {
+        let cfg = LengthConfig {
+            snake_every_end: every_end,
+            ..LengthConfig::default()
+        };
+        for (fish, seg) in &scenes {
+            let r = render(&sc, fish);
+            let (w, h) = (sc.w, sc.h);
+            let (li, ri) = match seg {
+                Seg::Full => (1, 3),
+                Seg::LeftCropped => (0, 3),
+                Seg::BothCropped => (0, 2),
+            };
+            let lm: Vec<&Vec<bool>> = r.masks.iter().map(|m| &m[li]).collect();
+            let rm: Vec<&Vec<bool>> = r.masks.iter().rev().map(|m| &m[ri]).collect();
+            let left = objects(&r.left, &lm, w, h);
+            let right = objects(&r.right, &rm, w, h);
+            let lv = ImageView::packed(&r.left, w, h).unwrap();
+            let rv = ImageView::packed(&r.right, w, h).unwrap();
+            let pairs = pair_objects(&lv, &rv, &left, &right, &geom, &limits).unwrap();
+            let core: Vec<(usize, usize, Option<f64>)> = pairs
+                .pairs
+                .iter()
+                .map(|p| {
+                    let l = measure_length::<N, R, 1024>(
+                        &lv, &rv, &left, &right, p, &geom, &params, &cfg,
+                    );
+                    (
+                        p.left as usize,
+                        p.right as usize,
+                        l.ok().map(|l| l.length_mm as f64),
+                    )
+                })
+                .collect();
+            let (gl, gr) = (
+                rs::Gray {
+                    data: &r.left,
+                    w,
+                    h,
+                },
+                rs::Gray {
+                    data: &r.right,
+                    w,
+                    h,
+                },
+            );
+            let (rl, rr) = (rs::ref_objects(&left), rs::ref_objects(&right));
+            let rpairs = rs::pair(&gl, &gr, &rl, &rr, &rgeom, &rs::Limits::from(&limits));
+            let reference: Vec<(usize, usize, Option<f64>)> = rpairs
+                .iter()
+                .map(|p| {
+                    let l = rs::length(&gl, &gr, &rl, &rr, p, &rgeom, &params, &cfg);
+                    (p.left, p.right, l.map(|l| l.length))
+                })
+                .collect();
+            let a = rs::compare(&core, &reference);
+            assert!(
+                a.ok(),
+                "{seg:?} every_end={every_end}: {a:?}\ncore {core:?}\nref {reference:?}"
+            );
+            worst = worst.max(a.max_length_rel_diff);
+            n_pairs += core.len();
+        }
+    }
+    println!(
+        "core vs f64 reference: {n_pairs} pairs identical, worst length difference {:.4} %",
+        worst * 100.0
+    );
+}
+
+/// Occlusion exception: two fish separate in the left view merge into one
+/// blob in the right view; both pair with it, the second flagged `occluded`.
+#[test]
+fn occlusion_shares_a_right_blob() {
+    let sc = Scene::new(1024, 640);
+    let a = fish_at(-300.0, 0.0, 1500.0, [1.0, 0.0, 0.0], 200.0, 110.0, 21);
+    // far fish: left x ≈ 200..280, right x ≈ 120..200, touching a's right image
+    let b = fish_at(-967.0, 10.0, 2500.0, [1.0, 0.0, 0.0], 250.0, 110.0, 22);
+    let r = render(&sc, &[a, b]);
+    let (w, h) = (sc.w, sc.h);
+    let left = objects(&r.left, &[&r.masks[0][1], &r.masks[1][1]], w, h);
+    let union: Vec<bool> = r.masks[0][3]
+        .iter()
+        .zip(&r.masks[1][3])
+        .map(|(p, q)| *p || *q)
+        .collect();
+    let right = objects(&r.right, &[&union], w, h);
+    println!(
+        "left boxes {:?} {:?}, right blob {:?}",
+        left.items[0].bbox, left.items[1].bbox, right.items[0].bbox
+    );
+    let lv = ImageView::packed(&r.left, w, h).unwrap();
+    let rv = ImageView::packed(&r.right, w, h).unwrap();
+    let limits = PairingLimits {
+        min_size_ratio: 0.3,
+        ..PairingLimits::default()
+    };
+    let out = pair_objects(&lv, &rv, &left, &right, &sc.geometry(), &limits).unwrap();
+    println!("{:?}\n{:?}", out.pairs, out.stats);
+    assert_eq!(out.pairs.len(), 2);
+    assert!(out.pairs.iter().all(|p| p.right == 0));
+    assert_eq!(out.pairs.iter().filter(|p| p.occluded).count(), 1);
+    assert_eq!(out.stats.occlusions, 1);
+    // each keeps its own disparity
+    let mut d: Vec<f32> = out.pairs.iter().map(|p| p.d_o).collect();
+    d.sort_by(|x, y| x.total_cmp(y));
+    assert!(
+        (d[0] - 80.0).abs() <= 3.0 && (d[1] - 133.3).abs() <= 3.0,
+        "{d:?}"
+    );
+}
