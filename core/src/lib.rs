@@ -28,3 +28,6 @@ pub use error::{ImageError, ParamError};
 pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;
+pub mod hist;
+pub mod morph;
+pub mod threshold;
