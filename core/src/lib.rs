@@ -31,3 +31,4 @@ pub use params::Params;
 pub mod hist;
 pub mod morph;
 pub mod threshold;
+pub mod label;
