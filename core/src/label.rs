@@ -333,15 +333,124 @@ impl Default for Slot {
     }
 }
 
+/// Words of one [`Slot`] in a [`StreamLabeler`] table (plain `u64`s so the
+/// table can live in a caller's byte workspace without `unsafe`).
+pub const SLOT_WORDS: usize = 11;
+
+/// Words of one [`LabelRun`].
+pub const RUN_WORDS: usize = 3;
+
+impl Moments {
+    /// Packs into 10 words.
+    pub fn to_words(&self, w: &mut [u64]) {
+        let v = [
+            self.area,
+            self.sx,
+            self.sy,
+            self.sxx,
+            self.syy,
+            self.sxy,
+            self.x_min as u64,
+            self.y_min as u64,
+            self.x_max as u64,
+            self.y_max as u64,
+        ];
+        for (d, s) in w.iter_mut().zip(v) {
+            *d = s;
+        }
+    }
+
+    /// Unpacks from 10 words (missing words read as 0).
+    pub fn from_words(w: &[u64]) -> Moments {
+        let g = |i: usize| w.get(i).copied().unwrap_or(0);
+        Moments {
+            area: g(0),
+            sx: g(1),
+            sy: g(2),
+            sxx: g(3),
+            syy: g(4),
+            sxy: g(5),
+            x_min: g(6) as u32,
+            y_min: g(7) as u32,
+            x_max: g(8) as u32,
+            y_max: g(9) as u32,
+        }
+    }
+}
+
+impl Slot {
+    fn decode(w: &[u64; SLOT_WORDS]) -> Slot {
+        Slot {
+            parent: w[0] as u32,
+            used: (w[0] >> 32) & 1 == 1,
+            live: (w[0] >> 33) & 1 == 1,
+            m: Moments::from_words(&w[1..]),
+        }
+    }
+
+    fn encode(&self, w: &mut [u64; SLOT_WORDS]) {
+        w[0] = self.parent as u64 | (self.used as u64) << 32 | (self.live as u64) << 33;
+        self.m.to_words(&mut w[1..]);
+    }
+}
+
+impl LabelRun {
+    fn decode(w: &[u32; RUN_WORDS]) -> LabelRun {
+        LabelRun {
+            x0: w[0],
+            x1: w[1],
+            label: w[2],
+        }
+    }
+
+    fn encode(&self) -> [u32; RUN_WORDS] {
+        [self.x0, self.x1, self.label]
+    }
+}
+
+/// Slot table access by value.
+struct Table<'a>(&'a mut [[u64; SLOT_WORDS]]);
+
+impl Table<'_> {
+    fn get(&self, i: usize) -> Option<Slot> {
+        self.0.get(i).map(Slot::decode)
+    }
+
+    fn set(&mut self, i: usize, s: Slot) {
+        if let Some(w) = self.0.get_mut(i) {
+            s.encode(w);
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+}
+
+/// Run list access by value.
+struct Runs<'a>(&'a mut [[u32; RUN_WORDS]]);
+
+impl Runs<'_> {
+    fn get(&self, i: usize) -> Option<LabelRun> {
+        self.0.get(i).map(LabelRun::decode)
+    }
+
+    fn set(&mut self, i: usize, r: LabelRun) {
+        if let Some(w) = self.0.get_mut(i) {
+            *w = r.encode();
+        }
+    }
+}
+
 /// Row-by-row 8-connected labelling that keeps only two rows of runs and
 /// reports each component's [`Moments`] when it is complete.
 pub struct StreamLabeler<'a> {
-    slots: &'a mut [Slot],
+    slots: Table<'a>,
     free: &'a mut [u32],
     n_free: usize,
-    prev: &'a mut [LabelRun],
+    prev: Runs<'a>,
     n_prev: usize,
-    cur: &'a mut [LabelRun],
+    cur: Runs<'a>,
     y: u32,
 }
 
@@ -361,19 +470,19 @@ impl<'a> StreamLabeler<'a> {
     /// [`Self::table_len`], `prev` and `cur` of [`Self::runs_len`].
     pub fn new(
         width: usize,
-        slots: &'a mut [Slot],
+        slots: &'a mut [[u64; SLOT_WORDS]],
         free: &'a mut [u32],
-        prev: &'a mut [LabelRun],
-        cur: &'a mut [LabelRun],
+        prev: &'a mut [[u32; RUN_WORDS]],
+        cur: &'a mut [[u32; RUN_WORDS]],
     ) -> Result<Self, LabelError> {
         let t = Self::table_len(width);
         let r = Self::runs_len(width);
         if slots.len() < t || free.len() < t || prev.len() < r || cur.len() < r {
             return Err(LabelError::TableTooSmall);
         }
-        let slots = &mut slots[..t];
-        for s in slots.iter_mut() {
-            *s = Slot::default();
+        let mut slots = Table(&mut slots[..t]);
+        for i in 0..t {
+            slots.set(i, Slot::default());
         }
         let free = &mut free[..t];
         for (i, f) in free.iter_mut().enumerate() {
@@ -383,27 +492,25 @@ impl<'a> StreamLabeler<'a> {
             slots,
             free,
             n_free: t,
-            prev,
+            prev: Runs(prev),
             n_prev: 0,
-            cur,
+            cur: Runs(cur),
             y: 0,
         })
     }
 
     fn find(&mut self, mut i: u32) -> u32 {
-        // parents form trees over live slots; bounded by the table size
+        // parents form trees over used slots; bounded by the table size
         for _ in 0..self.slots.len() {
-            let p = match self.slots.get(i as usize) {
-                Some(s) => s.parent,
-                None => return i,
+            let Some(si) = self.slots.get(i as usize) else {
+                return i;
             };
+            let p = si.parent;
             if p == i {
                 return i;
             }
             let gp = self.slots.get(p as usize).map(|s| s.parent).unwrap_or(p);
-            if let Some(s) = self.slots.get_mut(i as usize) {
-                s.parent = gp;
-            }
+            self.slots.set(i as usize, Slot { parent: gp, ..si });
             i = gp;
         }
         i
@@ -415,25 +522,33 @@ impl<'a> StreamLabeler<'a> {
         }
         self.n_free -= 1;
         let l = *self.free.get(self.n_free)?;
-        let s = self.slots.get_mut(l as usize)?;
-        *s = Slot {
-            parent: l,
-            used: true,
-            live: false,
-            m: Moments::EMPTY,
-        };
+        self.slots.set(
+            l as usize,
+            Slot {
+                parent: l,
+                used: true,
+                live: false,
+                m: Moments::EMPTY,
+            },
+        );
         Some(l)
     }
 
     fn release(&mut self, l: u32) {
-        if let Some(s) = self.slots.get_mut(l as usize) {
+        if let Some(s) = self.slots.get(l as usize) {
             if s.used {
-                s.used = false;
+                self.slots.set(l as usize, Slot { used: false, ..s });
                 if let Some(f) = self.free.get_mut(self.n_free) {
                     *f = l;
                     self.n_free += 1;
                 }
             }
+        }
+    }
+
+    fn set_live(&mut self, l: u32, live: bool) {
+        if let Some(s) = self.slots.get(l as usize) {
+            self.slots.set(l as usize, Slot { live, ..s });
         }
     }
 
@@ -458,26 +573,28 @@ impl<'a> StreamLabeler<'a> {
             while x < width && fg(x) {
                 x += 1;
             }
-            if let Some(r) = self.cur.get_mut(n_cur) {
-                *r = LabelRun {
+            self.cur.set(
+                n_cur,
+                LabelRun {
                     x0: x0 as u32,
                     x1: x as u32,
                     label: u32::MAX,
-                };
-                n_cur += 1;
-            }
+                },
+            );
+            n_cur += 1;
         }
-        // connect to the previous row (two-pointer sweep, 8-connectivity)
+        // connect to the previous row (two-pointer sweep, 8-connectivity:
+        // previous run [p.x0, p.x1) touches [r.x0 − 1, r.x1])
         let mut j0 = 0usize;
         for k in 0..n_cur {
-            let Some(&r) = self.cur.get(k) else { break };
+            let Some(r) = self.cur.get(k) else { break };
             let mut label: Option<u32> = None;
             while j0 < self.n_prev && self.prev.get(j0).is_some_and(|p| p.x1 < r.x0) {
                 j0 += 1;
             }
             let mut j = j0;
             while j < self.n_prev {
-                let Some(&p) = self.prev.get(j) else { break };
+                let Some(p) = self.prev.get(j) else { break };
                 if p.x0 > r.x1 {
                     break;
                 }
@@ -488,14 +605,12 @@ impl<'a> StreamLabeler<'a> {
                         let rl = self.find(l);
                         if rl != rp {
                             let (keep, gone) = if rl < rp { (rl, rp) } else { (rp, rl) };
-                            let gm = self.slots.get(gone as usize).map(|s| s.m);
-                            if let Some(gm) = gm {
-                                if let Some(s) = self.slots.get_mut(keep as usize) {
-                                    s.m.merge(&gm);
-                                }
-                            }
-                            if let Some(s) = self.slots.get_mut(gone as usize) {
-                                s.parent = keep;
+                            if let (Some(mut sk), Some(sg)) =
+                                (self.slots.get(keep as usize), self.slots.get(gone as usize))
+                            {
+                                sk.m.merge(&sg.m);
+                                self.slots.set(keep as usize, sk);
+                                self.slots.set(gone as usize, Slot { parent: keep, ..sg });
                             }
                             keep
                         } else {
@@ -513,26 +628,21 @@ impl<'a> StreamLabeler<'a> {
                     None => continue,
                 },
             };
-            if let Some(s) = self.slots.get_mut(l as usize) {
+            if let Some(mut s) = self.slots.get(l as usize) {
                 s.m.add_run(y, r.x0, r.x1);
+                self.slots.set(l as usize, s);
             }
-            if let Some(c) = self.cur.get_mut(k) {
-                c.label = l;
-            }
+            self.cur.set(k, LabelRun { label: l, ..r });
         }
         // compress current labels to roots and mark them live
         for k in 0..n_cur {
-            let l = self.cur.get(k).map(|c| c.label).unwrap_or(u32::MAX);
-            if l == u32::MAX {
+            let Some(c) = self.cur.get(k) else { break };
+            if c.label == u32::MAX {
                 continue;
             }
-            let r = self.find(l);
-            if let Some(c) = self.cur.get_mut(k) {
-                c.label = r;
-            }
-            if let Some(s) = self.slots.get_mut(r as usize) {
-                s.live = true;
-            }
+            let r = self.find(c.label);
+            self.cur.set(k, LabelRun { label: r, ..c });
+            self.set_live(r, true);
         }
         // Every slot in use is a label of a previous run (all were live roots
         // after the last row) or was allocated this row for a run with no
@@ -545,9 +655,7 @@ impl<'a> StreamLabeler<'a> {
         }
         for k in 0..n_cur {
             let l = self.cur.get(k).map(|c| c.label).unwrap_or(u32::MAX);
-            if let Some(s) = self.slots.get_mut(l as usize) {
-                s.live = false;
-            }
+            self.set_live(l, false);
         }
         core::mem::swap(&mut self.prev, &mut self.cur);
         self.n_prev = n_cur;
@@ -556,7 +664,7 @@ impl<'a> StreamLabeler<'a> {
 
     /// Emits and frees `l` if it is a finished root, frees it if it was merged.
     fn retire(&mut self, l: u32, done: &mut impl FnMut(&Moments)) {
-        let Some(s) = self.slots.get(l as usize).copied() else {
+        let Some(s) = self.slots.get(l as usize) else {
             return;
         };
         if !s.used || s.live {
@@ -620,7 +728,9 @@ mod tests {
         let mut s = seed;
         (0..w * h)
             .map(|_| {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 ((s >> 33) % 100 < density) as u8 * 255
             })
             .collect()
@@ -640,10 +750,16 @@ mod tests {
     fn moments_of_a_run() {
         let mut a = Moments::EMPTY;
         a.add_run(2, 3, 6); // (3,2) (4,2) (5,2)
-        assert_eq!((a.area, a.sx, a.sy, a.sxx, a.syy, a.sxy), (3, 12, 6, 50, 12, 24));
+        assert_eq!(
+            (a.area, a.sx, a.sy, a.sxx, a.syy, a.sxy),
+            (3, 12, 6, 50, 12, 24)
+        );
         assert_eq!((a.x_min, a.x_max, a.y_min, a.y_max), (3, 5, 2, 2));
         let (ang, l1, l2) = a.principal_axes();
-        assert!(ang.abs() < 1e-6 && (l1 - 2.0 / 3.0).abs() < 1e-5 && l2.abs() < 1e-6, "{ang} {l1} {l2}");
+        assert!(
+            ang.abs() < 1e-6 && (l1 - 2.0 / 3.0).abs() < 1e-5 && l2.abs() < 1e-6,
+            "{ang} {l1} {l2}"
+        );
         let mut d = Moments::EMPTY;
         for i in 0..10 {
             d.add_run(i, i, i + 1);
@@ -684,8 +800,8 @@ mod tests {
             let mut want = moments_of(&fl, w, n);
             let t = StreamLabeler::table_len(w);
             let r = StreamLabeler::runs_len(w);
-            let (mut slots, mut free) = (vec![Slot::default(); t], vec![0u32; t]);
-            let (mut prev, mut cur) = (vec![LabelRun::default(); r], vec![LabelRun::default(); r]);
+            let (mut slots, mut free) = (vec![[0u64; SLOT_WORDS]; t], vec![0u32; t]);
+            let (mut prev, mut cur) = (vec![[0u32; RUN_WORDS]; r], vec![[0u32; RUN_WORDS]; r]);
             let mut sl = StreamLabeler::new(w, &mut slots, &mut free, &mut prev, &mut cur).unwrap();
             let mut got = Vec::new();
             for y in 0..h {

@@ -18,6 +18,7 @@
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used, clippy::panic))]
 
 pub mod error;
 pub mod image;
@@ -29,6 +30,7 @@ pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;
 pub mod hist;
-pub mod morph;
-pub mod threshold;
 pub mod label;
+pub mod morph;
+pub mod segment;
+pub mod threshold;

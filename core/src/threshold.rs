@@ -66,7 +66,11 @@ pub fn lower_class_mean(hist: &[u32; 256], tau: u8) -> f32 {
 /// grey level exceeds the real value τ_x, i.e. when it exceeds `⌊τ_x⌋`.
 /// `p` is clamped to `[0, 1]`, so `⌊μ_L⌋ ≤ result ≤ τ`.
 pub fn shifted_threshold(tau: u8, mu_low: f32, p: f32) -> u8 {
-    let p = if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
+    let p = if p.is_finite() {
+        p.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let mu = if mu_low.is_finite() {
         mu_low.clamp(0.0, tau as f32)
     } else {
@@ -87,7 +91,11 @@ mod tests {
     /// independent formulation): maximise (N·S₁ − n₁·S)² / (n₁ (N − n₁)).
     fn otsu_exact(hist: &[u32; 256]) -> Option<u8> {
         let n: f64 = hist.iter().map(|&h| h as f64).sum();
-        let s: f64 = hist.iter().enumerate().map(|(i, &h)| i as f64 * h as f64).sum();
+        let s: f64 = hist
+            .iter()
+            .enumerate()
+            .map(|(i, &h)| i as f64 * h as f64)
+            .sum();
         let (mut n1, mut s1) = (0.0, 0.0);
         let mut best = (-1.0f64, None);
         for (i, &h) in hist.iter().enumerate() {
