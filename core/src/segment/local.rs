@@ -27,7 +27,7 @@
 //! on the stack two 256-bin histograms and a 256-entry table.
 
 use super::workspace::{RoiBufs, STAT_WORDS};
-use super::{emit, Candidate, MaskRef, Region, SegmentError, SegmentStats};
+use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
 use crate::hist::{bin_of, fold_bins, ratio_backprojection_lut};
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
@@ -110,6 +110,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     disk_scratch: &mut [u8],
     out: &mut Objects<N, R>,
     stats: &mut SegmentStats,
+    trace: &mut dyn FnMut(&RegionTrace),
 ) -> Result<(), SegmentError> {
     let (fw, fh) = (frame.width(), frame.height());
     let mut reg = *region;
@@ -165,6 +166,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     } else {
         (tau, tau)
     };
+    trace(&RegionTrace {
+        region: reg,
+        roi,
+        tau,
+        t_low,
+        t_high,
+    });
     let a = bufs.a.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
     let b = bufs.b.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
     let c = bufs.c.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;

@@ -161,6 +161,22 @@ impl MaskRef<'_> {
     }
 }
 
+/// What happened in one region, for tracing and for `fishtrack compare`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RegionTrace {
+    /// The region (after any shrinking to the ROI capacity).
+    pub region: Region,
+    /// Its bounding box.
+    pub roi: Roi,
+    /// Otsu's τ on the ellipse's pixels.
+    pub tau: u8,
+    /// ⌊τ_low⌋ of eq. (1).
+    pub t_low: u8,
+    /// ⌊τ_high⌋ of eq. (1).
+    pub t_high: u8,
+}
+
 /// Segments `img` (a rectified 8-bit frame) into `out`.
 ///
 /// `ws` must hold at least [`workspace_size`]`(width, height, m)` bytes;
@@ -170,6 +186,18 @@ pub fn segment_frame<const N: usize, const R: usize>(
     params: &Params,
     ws: &mut [u8],
     out: &mut Objects<N, R>,
+) -> Result<SegmentStats, SegmentError> {
+    segment_frame_traced(img, params, ws, out, &mut |_| {})
+}
+
+/// [`segment_frame`], calling `trace` for every region that reaches the
+/// thresholding step.
+pub fn segment_frame_traced<const N: usize, const R: usize>(
+    img: ImageView<'_>,
+    params: &Params,
+    ws: &mut [u8],
+    out: &mut Objects<N, R>,
+    trace: &mut dyn FnMut(&RegionTrace),
 ) -> Result<SegmentStats, SegmentError> {
     out.clear();
     params.validate().map_err(SegmentError::Params)?;
@@ -195,6 +223,7 @@ pub fn segment_frame<const N: usize, const R: usize>(
             ws.disk,
             out,
             &mut stats,
+            trace,
         )?;
     }
     compact_runs(out);

@@ -1,0 +1,144 @@
+//! Core vs reference agreement for segmentation (`fishtrack compare`):
+//! per-region Otsu thresholds within 1 grey level, every object matched
+//! one-to-one with mask IoU ≥ 0.99.
+
+use super::segment::{segment, RefResult};
+use fishtrack_core::segment::{segment_frame_traced, workspace_size, RegionTrace, SegmentStats};
+use fishtrack_core::{ImageView, Objects, Params};
+use image::GrayImage;
+use std::collections::HashSet;
+
+/// Objects per frame the comparison's core run holds.
+pub const CMP_OBJECTS: usize = 256;
+/// Mask runs per frame the comparison's core run holds.
+pub const CMP_RUNS: usize = 1 << 16;
+
+/// Agreement figures for one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegAgreement {
+    /// Objects found by the core.
+    pub core_objects: usize,
+    /// Objects found by the reference.
+    pub ref_objects: usize,
+    /// Objects matched one-to-one (greedy by IoU, IoU > 0.5).
+    pub matched: usize,
+    /// Smallest IoU over matched pairs (1 when none).
+    pub min_iou: f64,
+    /// Regions (with thresholds) matched by centre.
+    pub regions_matched: usize,
+    /// Largest |τ_core − τ_ref| over matched regions.
+    pub max_tau_diff: u8,
+    /// Largest |⌊τ_low⌋ or ⌊τ_high⌋ core − reference| over matched regions.
+    pub max_shift_diff: u8,
+    /// The core's counters.
+    pub core_stats: SegmentStats,
+}
+
+impl SegAgreement {
+    /// The DESIGN.md criteria: thresholds within 1 grey level, identical
+    /// object sets, every mask IoU ≥ 0.99.
+    pub fn passes(&self) -> bool {
+        self.core_objects == self.ref_objects
+            && self.matched == self.core_objects
+            && self.min_iou >= 0.99
+            && self.max_tau_diff <= 1
+    }
+}
+
+/// Core objects as pixel sets.
+pub fn core_masks<const N: usize, const R: usize>(objs: &Objects<N, R>) -> Vec<HashSet<(u32, u32)>> {
+    objs.items
+        .iter()
+        .map(|o| {
+            objs.runs_of(o)
+                .iter()
+                .flat_map(|r| (r.x0..r.x1).map(move |x| (x as u32, r.y as u32)))
+                .collect()
+        })
+        .collect()
+}
+
+fn iou(a: &HashSet<(u32, u32)>, b: &HashSet<(u32, u32)>) -> f64 {
+    let i = a.intersection(b).count() as f64;
+    let u = (a.len() + b.len()) as f64 - i;
+    if u == 0.0 {
+        1.0
+    } else {
+        i / u
+    }
+}
+
+/// Runs the core and the reference on `img` and measures their agreement.
+/// Fails only if the core rejects the frame or the parameters.
+pub fn compare_segmentation(
+    img: &GrayImage,
+    params: &Params,
+) -> Result<(SegAgreement, RefResult), fishtrack_core::segment::SegmentError> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let mut ws = vec![0u8; workspace_size(w, h, w * h)];
+    let mut out: Box<Objects<CMP_OBJECTS, CMP_RUNS>> = Box::default();
+    let mut traces: Vec<RegionTrace> = Vec::new();
+    let view = ImageView::packed(img.as_raw(), w, h).map_err(fishtrack_core::segment::SegmentError::Image)?;
+    let stats = segment_frame_traced(view, params, &mut ws, &mut out, &mut |t| traces.push(*t))?;
+    let reference = segment(img, params);
+    let cm = core_masks(&out);
+    let rm: Vec<&HashSet<(u32, u32)>> = reference.objects.iter().map(|o| &o.pixels).collect();
+    // greedy one-to-one matching by IoU
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (i, a) in cm.iter().enumerate() {
+        for (j, b) in rm.iter().enumerate() {
+            let v = iou(a, b);
+            if v > 0.5 {
+                pairs.push((v, i, j));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut ui, mut uj) = (HashSet::new(), HashSet::new());
+    let mut min_iou: f64 = 1.0;
+    for (v, i, j) in pairs {
+        if ui.contains(&i) || uj.contains(&j) {
+            continue;
+        }
+        ui.insert(i);
+        uj.insert(j);
+        min_iou = min_iou.min(v);
+    }
+    // regions: match by centre (same coarse component ⇒ same centroid)
+    let (mut rmatched, mut max_tau, mut max_shift) = (0usize, 0u8, 0u8);
+    for t in &traces {
+        let best = reference
+            .regions
+            .iter()
+            .filter(|r| r.tau.is_some())
+            .min_by(|a, b| {
+                let d = |r: &&super::segment::RefRegion| {
+                    (r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2)
+                };
+                d(a).total_cmp(&d(b))
+            });
+        if let Some(r) = best {
+            let d = ((r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2)).sqrt();
+            if d < 0.5 {
+                rmatched += 1;
+                max_tau = max_tau.max(r.tau.unwrap_or(0).abs_diff(t.tau));
+                max_shift = max_shift
+                    .max((r.t_low.floor() as u8).abs_diff(t.t_low))
+                    .max((r.t_high.floor() as u8).abs_diff(t.t_high));
+            }
+        }
+    }
+    Ok((
+        SegAgreement {
+            core_objects: cm.len(),
+            ref_objects: rm.len(),
+            matched: ui.len(),
+            min_iou,
+            regions_matched: rmatched,
+            max_tau_diff: max_tau,
+            max_shift_diff: max_shift,
+            core_stats: stats,
+        },
+        reference,
+    ))
+}
