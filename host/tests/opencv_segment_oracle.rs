@@ -35,8 +35,14 @@ fn check_frame(w: usize, h: usize, grey: &[u8], seed: u64) {
         .collect();
     write_pgm(&d.join("mask.pgm"), w, h, &mask);
     // M_low ⊇ M_high, as the double thresholds make them
-    let m_low: Vec<u8> = grey.iter().map(|&p| if p as i32 > t as i32 - 12 { 255 } else { 0 }).collect();
-    let m_high: Vec<u8> = grey.iter().map(|&p| if p as i32 > t as i32 - 4 { 255 } else { 0 }).collect();
+    let m_low: Vec<u8> = grey
+        .iter()
+        .map(|&p| if p as i32 > t as i32 - 12 { 255 } else { 0 })
+        .collect();
+    let m_high: Vec<u8> = grey
+        .iter()
+        .map(|&p| if p as i32 > t as i32 - 4 { 255 } else { 0 })
+        .collect();
     write_pgm(&d.join("m_low.pgm"), w, h, &m_low);
     write_pgm(&d.join("m_high.pgm"), w, h, &m_high);
     if run_python("opencv_segment_oracle.py", &[d]).is_none() {
@@ -82,10 +88,20 @@ fn check_frame(w: usize, h: usize, grey: &[u8], seed: u64) {
     // numbering differs by convention: ours is raster order of each
     // component's first pixel; OpenCV's block-based scan numbers otherwise.)
     let mut labels = vec![0i32; w * h];
-    let n = label_components(ImageView::packed(&mask, w, h).unwrap(), &mut labels, |_| true).unwrap();
-    assert_eq!(n as i64, json["components"].as_i64().unwrap(), "component count");
+    let n = label_components(ImageView::packed(&mask, w, h).unwrap(), &mut labels, |_| {
+        true
+    })
+    .unwrap();
+    assert_eq!(
+        n as i64,
+        json["components"].as_i64().unwrap(),
+        "component count"
+    );
     let raw = std::fs::read(d.join("labels.bin")).unwrap();
-    let cvl: Vec<i32> = raw.chunks_exact(4).map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    let cvl: Vec<i32> = raw
+        .chunks_exact(4)
+        .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
     assert_eq!(cvl.len(), w * h);
     let mut ours_to_cv = vec![-1i32; n as usize + 1];
     let mut cv_to_ours = vec![-1i32; n as usize + 1];
@@ -98,8 +114,14 @@ fn check_frame(w: usize, h: usize, grey: &[u8], seed: u64) {
         if cv_to_ours[b as usize] == -1 {
             cv_to_ours[b as usize] = a;
         }
-        assert_eq!(ours_to_cv[a as usize], b, "one component of ours spans two of OpenCV's");
-        assert_eq!(cv_to_ours[b as usize], a, "one component of OpenCV's spans two of ours");
+        assert_eq!(
+            ours_to_cv[a as usize], b,
+            "one component of ours spans two of OpenCV's"
+        );
+        assert_eq!(
+            cv_to_ours[b as usize], a,
+            "one component of OpenCV's spans two of ours"
+        );
     }
     // statistics per component (area, box, centroid) from our labels
     let cc = json["cc"].as_array().unwrap();
@@ -114,11 +136,23 @@ fn check_frame(w: usize, h: usize, grey: &[u8], seed: u64) {
         assert_eq!(mm.area as i64, c["area"].as_i64().unwrap(), "area {k}");
         assert_eq!(mm.x_min as i64, c["left"].as_i64().unwrap(), "left {k}");
         assert_eq!(mm.y_min as i64, c["top"].as_i64().unwrap(), "top {k}");
-        assert_eq!((mm.x_max - mm.x_min + 1) as i64, c["width"].as_i64().unwrap());
-        assert_eq!((mm.y_max - mm.y_min + 1) as i64, c["height"].as_i64().unwrap());
+        assert_eq!(
+            (mm.x_max - mm.x_min + 1) as i64,
+            c["width"].as_i64().unwrap()
+        );
+        assert_eq!(
+            (mm.y_max - mm.y_min + 1) as i64,
+            c["height"].as_i64().unwrap()
+        );
         let (cx, cy) = mm.centroid();
-        assert!((cx as f64 - c["cx"].as_f64().unwrap()).abs() < 1e-3, "cx {k}");
-        assert!((cy as f64 - c["cy"].as_f64().unwrap()).abs() < 1e-3, "cy {k}");
+        assert!(
+            (cx as f64 - c["cx"].as_f64().unwrap()).abs() < 1e-3,
+            "cx {k}"
+        );
+        assert!(
+            (cy as f64 - c["cy"].as_f64().unwrap()).abs() < 1e-3,
+            "cy {k}"
+        );
     }
 
     // histograms of the two masks, ratio histogram, backprojection
@@ -132,8 +166,15 @@ fn check_frame(w: usize, h: usize, grey: &[u8], seed: u64) {
         fold_bins(&hl, &mut bl);
         fold_bins(&hh, &mut bh);
         let lut = ratio_backprojection_lut(&bh, &bl, 0.3);
-        let ours: Vec<u8> = grey.iter().map(|&p| if lut[p as usize] { 255 } else { 0 }).collect();
-        assert_eq!(count_diff(&ours, &cv(&format!("backproject_{bins}.pgm"))), 0, "backprojection, {bins} bins");
+        let ours: Vec<u8> = grey
+            .iter()
+            .map(|&p| if lut[p as usize] { 255 } else { 0 })
+            .collect();
+        assert_eq!(
+            count_diff(&ours, &cv(&format!("backproject_{bins}.pgm"))),
+            0,
+            "backprojection, {bins} bins"
+        );
         assert!(bin_of(255, bins) == bins - 1);
     }
     eprintln!("OpenCV oracle: {w}x{h}: Otsu {t}, {n} components, all primitives identical");

@@ -1,6 +1,6 @@
 //! Core vs reference agreement for segmentation (`fishtrack compare`):
 //! per-region Otsu thresholds within 1 grey level, every object matched
-//! one-to-one with mask IoU ≥ 0.99.
+//! one-to-one with mask IoU ≥ 0.99, oriented-box lengths within 0.5 %.
 
 use super::segment::{segment, RefResult};
 use fishtrack_core::segment::{segment_frame_traced, workspace_size, RegionTrace, SegmentStats};
@@ -24,6 +24,9 @@ pub struct SegAgreement {
     pub matched: usize,
     /// Smallest IoU over matched pairs (1 when none).
     pub min_iou: f64,
+    /// Largest relative difference of the oriented-box length (2·half_w)
+    /// over matched pairs.
+    pub max_length_rel_diff: f64,
     /// Regions (with thresholds) matched by centre.
     pub regions_matched: usize,
     /// Largest |τ_core − τ_ref| over matched regions.
@@ -42,11 +45,14 @@ impl SegAgreement {
             && self.matched == self.core_objects
             && self.min_iou >= 0.99
             && self.max_tau_diff <= 1
+            && self.max_length_rel_diff <= 0.005
     }
 }
 
 /// Core objects as pixel sets.
-pub fn core_masks<const N: usize, const R: usize>(objs: &Objects<N, R>) -> Vec<HashSet<(u32, u32)>> {
+pub fn core_masks<const N: usize, const R: usize>(
+    objs: &Objects<N, R>,
+) -> Vec<HashSet<(u32, u32)>> {
     objs.items
         .iter()
         .map(|o| {
@@ -78,7 +84,8 @@ pub fn compare_segmentation(
     let mut ws = vec![0u8; workspace_size(w, h, w * h)];
     let mut out: Box<Objects<CMP_OBJECTS, CMP_RUNS>> = Box::default();
     let mut traces: Vec<RegionTrace> = Vec::new();
-    let view = ImageView::packed(img.as_raw(), w, h).map_err(fishtrack_core::segment::SegmentError::Image)?;
+    let view = ImageView::packed(img.as_raw(), w, h)
+        .map_err(fishtrack_core::segment::SegmentError::Image)?;
     let stats = segment_frame_traced(view, params, &mut ws, &mut out, &mut |t| traces.push(*t))?;
     let reference = segment(img, params);
     let cm = core_masks(&out);
@@ -96,6 +103,7 @@ pub fn compare_segmentation(
     pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
     let (mut ui, mut uj) = (HashSet::new(), HashSet::new());
     let mut min_iou: f64 = 1.0;
+    let mut max_len: f64 = 0.0;
     for (v, i, j) in pairs {
         if ui.contains(&i) || uj.contains(&j) {
             continue;
@@ -103,6 +111,9 @@ pub fn compare_segmentation(
         ui.insert(i);
         uj.insert(j);
         min_iou = min_iou.min(v);
+        let lc = 2.0 * out.items[i].obb.half_w as f64;
+        let lr = 2.0 * reference.objects[j].obb.2;
+        max_len = max_len.max((lc - lr).abs() / lr.max(1e-9));
     }
     // regions: match by centre (same coarse component ⇒ same centroid)
     let (mut rmatched, mut max_tau, mut max_shift) = (0usize, 0u8, 0u8);
@@ -118,7 +129,8 @@ pub fn compare_segmentation(
                 d(a).total_cmp(&d(b))
             });
         if let Some(r) = best {
-            let d = ((r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2)).sqrt();
+            let d =
+                ((r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2)).sqrt();
             if d < 0.5 {
                 rmatched += 1;
                 max_tau = max_tau.max(r.tau.unwrap_or(0).abs_diff(t.tau));
@@ -134,6 +146,7 @@ pub fn compare_segmentation(
             ref_objects: rm.len(),
             matched: ui.len(),
             min_iou,
+            max_length_rel_diff: max_len,
             regions_matched: rmatched,
             max_tau_diff: max_tau,
             max_shift_diff: max_shift,

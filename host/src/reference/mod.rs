@@ -3,5 +3,5 @@
 //! primitives. It is the yardstick `fishtrack compare` measures the core
 //! against (DESIGN.md, "Float reference").
 
-pub mod segment;
 pub mod compare;
+pub mod segment;

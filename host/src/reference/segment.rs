@@ -82,7 +82,11 @@ pub fn opencv_ellipse_mask(size: u8) -> Mask {
     let mut img = GrayImage::new(s, s);
     for i in 0..s {
         let dy = i as f64 - r;
-        let dx = if r > 0.0 { (r * ((r * r - dy * dy) / (r * r)).max(0.0).sqrt()).round() } else { 0.0 };
+        let dx = if r > 0.0 {
+            (r * ((r * r - dy * dy) / (r * r)).max(0.0).sqrt()).round()
+        } else {
+            0.0
+        };
         for j in 0..s {
             if (j as f64 - r).abs() <= dx {
                 img.put_pixel(j, i, Luma([255]));
@@ -193,9 +197,16 @@ fn components(mask: &GrayImage) -> Vec<Vec<(u32, u32)>> {
 
 fn mean_var(img: &GrayImage, px: &[(u32, u32)]) -> (f64, f64) {
     let n = px.len() as f64;
-    let m = px.iter().map(|&(x, y)| img.get_pixel(x, y).0[0] as f64).sum::<f64>() / n;
+    let m = px
+        .iter()
+        .map(|&(x, y)| img.get_pixel(x, y).0[0] as f64)
+        .sum::<f64>()
+        / n;
     let v = if px.len() > 1 {
-        px.iter().map(|&(x, y)| (img.get_pixel(x, y).0[0] as f64 - m).powi(2)).sum::<f64>() / (n - 1.0)
+        px.iter()
+            .map(|&(x, y)| (img.get_pixel(x, y).0[0] as f64 - m).powi(2))
+            .sum::<f64>()
+            / (n - 1.0)
     } else {
         0.0
     };
@@ -219,7 +230,13 @@ fn oriented_box(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
         }
     }
     let (um, vm) = (0.5 * (umin + umax), 0.5 * (vmin + vmax));
-    (mx + um * c - vm * s, my + um * s + vm * c, 0.5 * (umax - umin), 0.5 * (vmax - vmin), angle)
+    (
+        mx + um * c - vm * s,
+        my + um * s + vm * c,
+        0.5 * (umax - umin),
+        0.5 * (vmax - vmin),
+        angle,
+    )
 }
 
 /// Segments one frame.
@@ -233,7 +250,10 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
     for (o, q) in fg.pixels_mut().zip(g.pixels()) {
         o.0[0] = if q.0[0] > t { 255 } else { 0 };
     }
-    let mut res = RefResult { gradient_threshold: t, ..RefResult::default() };
+    let mut res = RefResult {
+        gradient_threshold: t,
+        ..RefResult::default()
+    };
     let min_coarse = (p.area_min / 4).max(1) as usize;
     let (amin, amax) = (p.area_min as usize, p.area_max as usize);
     for comp in components(&fg) {
@@ -245,7 +265,16 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         let a = (2.0 * l1.sqrt()).max(0.5) * s;
         let b = (2.0 * l2.sqrt()).max(0.5) * s;
         let ri = res.regions.len();
-        res.regions.push(RefRegion { cx, cy, a, b, angle, tau: None, t_low: 0.0, t_high: 0.0 });
+        res.regions.push(RefRegion {
+            cx,
+            cy,
+            a,
+            b,
+            angle,
+            tau: None,
+            t_low: 0.0,
+            t_high: 0.0,
+        });
         // pixels of the ellipse
         let (c, sn) = (angle.cos(), angle.sin());
         let inside = |x: u32, y: u32| {
@@ -264,18 +293,33 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
             continue;
         }
         let (rw, rh) = (x1 - x0, y1 - y0);
-        let ins: Vec<bool> = (0..rw * rh).map(|i| inside(x0 + i % rw, y0 + i / rw)).collect();
+        let ins: Vec<bool> = (0..rw * rh)
+            .map(|i| inside(x0 + i % rw, y0 + i / rw))
+            .collect();
         let at = |i: u32| filtered.get_pixel(x0 + i % rw, y0 + i / rw).0[0];
         let vals: Vec<u8> = (0..rw * rh).filter(|&i| ins[i as usize]).map(at).collect();
         if vals.is_empty() || vals.len() < amin {
             continue;
         }
         // eq. (1)
-        let tau = otsu_level(&GrayImage::from_raw(vals.len() as u32, 1, vals.clone()).unwrap_or_default());
-        let low: Vec<f64> = vals.iter().filter(|&&v| v <= tau).map(|&v| v as f64).collect();
-        let mu_l = if low.is_empty() { tau as f64 } else { low.iter().sum::<f64>() / low.len() as f64 };
+        let tau = otsu_level(
+            &GrayImage::from_raw(vals.len() as u32, 1, vals.clone()).unwrap_or_default(),
+        );
+        let low: Vec<f64> = vals
+            .iter()
+            .filter(|&&v| v <= tau)
+            .map(|&v| v as f64)
+            .collect();
+        let mu_l = if low.is_empty() {
+            tau as f64
+        } else {
+            low.iter().sum::<f64>() / low.len() as f64
+        };
         let (t_low, t_high) = if p.double_threshold {
-            (tau as f64 - p.p_low as f64 * (tau as f64 - mu_l), tau as f64 - p.p_high as f64 * (tau as f64 - mu_l))
+            (
+                tau as f64 - p.p_low as f64 * (tau as f64 - mu_l),
+                tau as f64 - p.p_high as f64 * (tau as f64 - mu_l),
+            )
         } else {
             (tau as f64, tau as f64)
         };
@@ -288,7 +332,11 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         let mask_of = |t: f64| {
             GrayImage::from_fn(rw, rh, |x, y| {
                 let i = y * rw + x;
-                Luma([if ins[i as usize] && at(i) as f64 > t { 255 } else { 0 }])
+                Luma([if ins[i as usize] && at(i) as f64 > t {
+                    255
+                } else {
+                    0
+                }])
             })
         };
         let restrict = |m: GrayImage| {
@@ -313,11 +361,19 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                     hh[bin] += 1.0;
                 }
             }
-            let ratio: Vec<f64> = hl.iter().zip(&hh).map(|(&l, &hv)| if l > 0.0 { (hv / l).min(1.0) } else { 0.0 }).collect();
+            let ratio: Vec<f64> = hl
+                .iter()
+                .zip(&hh)
+                .map(|(&l, &hv)| if l > 0.0 { (hv / l).min(1.0) } else { 0.0 })
+                .collect();
             GrayImage::from_fn(rw, rh, |x, y| {
                 let i = y * rw + x;
                 let bp = ratio[at(i) as usize * bins / 256];
-                Luma([if ins[i as usize] && bp > p.theta_bp as f64 { 255 } else { 0 }])
+                Luma([if ins[i as usize] && bp > p.theta_bp as f64 {
+                    255
+                } else {
+                    0
+                }])
             })
         } else {
             m_high

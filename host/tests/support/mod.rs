@@ -16,7 +16,10 @@ pub struct Fish {
 pub struct Lcg(pub u64);
 impl Lcg {
     pub fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 40) as f32 / (1u64 << 24) as f32
     }
     pub fn gauss(&mut self) -> f32 {
@@ -44,7 +47,11 @@ pub fn draw(w: usize, h: usize, fish: &[Fish], noise: f32, mesh: bool, seed: u64
                 let vv = -dx * s + dy * c;
                 if u * u / (f.a * f.a) + vv * vv / (f.b * f.b) <= 1.0 {
                     let tail = if u < -f.a / 3.0 { 0.6 } else { 1.0 };
-                    let stripe = if ((u / 4.0) as i32) % 2 == 0 { 6.0 } else { -6.0 };
+                    let stripe = if ((u / 4.0) as i32) % 2 == 0 {
+                        6.0
+                    } else {
+                        -6.0
+                    };
                     v = base + f.contrast * tail + stripe;
                 }
             }
@@ -69,10 +76,13 @@ pub fn school(w: usize, h: usize, n: usize, seed: u64) -> Vec<Fish> {
             cy: h as f32 * (0.25 + 0.5 * rng.next()),
             a,
             b: a * (0.22 + 0.08 * rng.next()),
-            angle: rng.next() * 6.283,
+            angle: rng.next() * std::f32::consts::TAU,
             contrast: 40.0 + 40.0 * rng.next(),
         };
-        if out.iter().all(|g| ((g.cx - f.cx).powi(2) + (g.cy - f.cy).powi(2)).sqrt() > g.a + f.a + 10.0) {
+        if out
+            .iter()
+            .all(|g| ((g.cx - f.cx).powi(2) + (g.cy - f.cy).powi(2)).sqrt() > g.a + f.a + 10.0)
+        {
             out.push(f);
         }
     }
@@ -116,7 +126,9 @@ pub fn read_pgm(path: &std::path::Path) -> (usize, usize, Vec<u8>) {
 /// missing, unless FISHTRACK_REQUIRE_PYTHON=1.
 pub fn run_python(script: &str, args: &[&std::path::Path]) -> Option<()> {
     let require = std::env::var("FISHTRACK_REQUIRE_PYTHON").is_ok_and(|v| v == "1");
-    let probe = std::process::Command::new("python3").args(["-c", "import cv2, numpy"]).output();
+    let probe = std::process::Command::new("python3")
+        .args(["-c", "import cv2, numpy"])
+        .output();
     if !probe.as_ref().is_ok_and(|o| o.status.success()) {
         if require {
             panic!("python3 with cv2/numpy is required (FISHTRACK_REQUIRE_PYTHON=1): {probe:?}");
@@ -124,8 +136,20 @@ pub fn run_python(script: &str, args: &[&std::path::Path]) -> Option<()> {
         eprintln!("SKIP: python3 with cv2/numpy not available");
         return None;
     }
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("scripts").join(script);
-    let out = std::process::Command::new("python3").arg(&path).args(args).output().unwrap();
-    assert!(out.status.success(), "{}: {}", path.display(), String::from_utf8_lossy(&out.stderr));
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("scripts")
+        .join(script);
+    let out = std::process::Command::new("python3")
+        .arg(&path)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        path.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
     Some(())
 }
