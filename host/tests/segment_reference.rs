@@ -94,3 +94,30 @@ fn ablations_agree_too() {
         assert!(agr.passes(), "{p:?}: {agr:?}");
     }
 }
+
+mod random {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+        /// Random drawn frames (sizes, noise, school, mesh, ablations): the
+        /// core and the reference agree by the `compare` criteria. The area
+        /// limits are those of 512-wide frames: with the limits of a 130-px
+        /// frame (θ_A^L ≈ 8 px) noise specks of a dozen pixels become
+        /// regions whose Otsu criterion has near-ties that the core's
+        /// (OpenCV's) and imageproc's float formulations break differently.
+        #[test]
+        fn core_agrees_with_reference_on_random_frames(
+            w in 256usize..448, h in 256usize..448, n in 0usize..5, noise in 0.0f32..12.0,
+            mesh in any::<bool>(), seed in any::<u64>(), dt in any::<bool>(), bp in any::<bool>(),
+            bins in prop::sample::select(vec![8u8, 16, 32]),
+        ) {
+            let (img, _) = frame(w, h, n, noise, mesh, seed);
+            let p = Params { double_threshold: dt, backprojection: bp, hist_bins: bins, ..Params::for_frame(512) };
+            let (agr, _) = compare_segmentation(&img, &p).unwrap();
+            prop_assert!(agr.passes(), "{:?}", agr);
+            eprintln!("random frame {w}x{h}: {} objects, {} regions compared", agr.core_objects, agr.regions_matched);
+        }
+    }
+}

@@ -3,6 +3,9 @@
 
 use super::*;
 use proptest::prelude::*;
+use std::boxed::Box;
+use std::vec;
+use std::vec::Vec;
 
 /// A drawn fish: centre, semi-axes, angle, body contrast.
 #[derive(Clone, Copy, Debug)]
@@ -322,4 +325,43 @@ proptest! {
             prop_assert!(o.mean >= 0.0 && o.mean <= 255.0);
         }
     }
+}
+
+#[test]
+fn full_size_frame_with_recommended_capacities() {
+    let (w, h) = (2048usize, 2048usize);
+    let fish = school(w);
+    let img = draw(w, h, &fish, 6.0, true, 21);
+    let p = Params::default();
+    let size = workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS);
+    let mut ws = vec![0u8; size];
+    let mut out: Box<Objects<64, 16384>> = Box::default();
+    let t0 = std::time::Instant::now();
+    let st = segment_frame(
+        ImageView::packed(&img, w, h).unwrap(),
+        &p,
+        &mut ws,
+        &mut out,
+    )
+    .unwrap();
+    let dt = t0.elapsed();
+    std::eprintln!(
+        "2048x2048: workspace {} bytes ({:.2} MiB; frame part {}), Objects<64,16384> {} bytes, Object {} bytes, {:?}, {:?}",
+        size,
+        size as f64 / (1 << 20) as f64,
+        fixed_size(w, h),
+        core::mem::size_of::<Objects<64, 16384>>(),
+        core::mem::size_of::<Object>(),
+        dt,
+        st
+    );
+    assert_eq!(out.items.len(), fish.len(), "{st:?}");
+    assert_eq!(st.regions_shrunk + st.label_overflow + st.dropped, 0);
+    for f in &fish {
+        let o = nearest(&out.items, f).unwrap();
+        let err = (2.0 * o.obb.half_w - 2.0 * f.a).abs() / (2.0 * f.a);
+        assert!(err < 0.08, "{f:?}: {o:?}");
+    }
+    let runs_used = out.runs.len();
+    std::eprintln!("runs used {runs_used} for {} objects", out.items.len());
 }

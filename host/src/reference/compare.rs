@@ -29,8 +29,13 @@ pub struct SegAgreement {
     pub max_length_rel_diff: f64,
     /// Regions (with thresholds) matched by centre.
     pub regions_matched: usize,
-    /// Largest |τ_core − τ_ref| over matched regions.
+    /// Largest |τ_core − τ_ref| over the regions that produced the
+    /// reference's objects (the per-object Otsu thresholds).
     pub max_tau_diff: u8,
+    /// Largest |τ_core − τ_ref| over all matched regions, with or without
+    /// objects (information: in tiny noise-only regions Otsu's criterion has
+    /// near-ties that the two float formulations break differently).
+    pub max_tau_diff_all_regions: u8,
     /// Largest |⌊τ_low⌋ or ⌊τ_high⌋ core − reference| over matched regions.
     pub max_shift_diff: u8,
     /// The core's counters.
@@ -116,28 +121,35 @@ pub fn compare_segmentation(
         max_len = max_len.max((lc - lr).abs() / lr.max(1e-9));
     }
     // regions: match by centre (same coarse component ⇒ same centroid)
-    let (mut rmatched, mut max_tau, mut max_shift) = (0usize, 0u8, 0u8);
-    for t in &traces {
-        let best = reference
-            .regions
+    let core_region = |r: &super::segment::RefRegion| -> Option<&RegionTrace> {
+        traces
             .iter()
-            .filter(|r| r.tau.is_some())
-            .min_by(|a, b| {
-                let d = |r: &&super::segment::RefRegion| {
-                    (r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2)
-                };
-                d(a).total_cmp(&d(b))
-            });
-        if let Some(r) = best {
-            let d =
-                ((r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2)).sqrt();
-            if d < 0.5 {
-                rmatched += 1;
-                max_tau = max_tau.max(r.tau.unwrap_or(0).abs_diff(t.tau));
-                max_shift = max_shift
-                    .max((r.t_low.floor() as u8).abs_diff(t.t_low))
-                    .max((r.t_high.floor() as u8).abs_diff(t.t_high));
-            }
+            .map(|t| {
+                let d = ((r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2))
+                    .sqrt();
+                (d, t)
+            })
+            .filter(|(d, _)| *d < 0.5)
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, t)| t)
+    };
+    let (mut rmatched, mut max_tau_all, mut max_shift) = (0usize, 0u8, 0u8);
+    for r in reference.regions.iter() {
+        let (Some(tau), Some(t)) = (r.tau, core_region(r)) else {
+            continue;
+        };
+        rmatched += 1;
+        max_tau_all = max_tau_all.max(tau.abs_diff(t.tau));
+        max_shift = max_shift
+            .max((r.t_low.floor() as u8).abs_diff(t.t_low))
+            .max((r.t_high.floor() as u8).abs_diff(t.t_high));
+    }
+    let mut max_tau = 0u8;
+    for o in &reference.objects {
+        let r = &reference.regions[o.region];
+        match (r.tau, core_region(r)) {
+            (Some(tau), Some(t)) => max_tau = max_tau.max(tau.abs_diff(t.tau)),
+            _ => max_tau = u8::MAX, // the core has no such region
         }
     }
     Ok((
@@ -149,6 +161,7 @@ pub fn compare_segmentation(
             max_length_rel_diff: max_len,
             regions_matched: rmatched,
             max_tau_diff: max_tau,
+            max_tau_diff_all_regions: max_tau_all,
             max_shift_diff: max_shift,
             core_stats: stats,
         },
