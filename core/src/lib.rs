@@ -29,6 +29,7 @@ pub use error::{ImageError, ParamError};
 pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;
+pub use segment::{segment_frame, workspace_size, SegmentError, SegmentStats};
 pub mod hist;
 pub mod label;
 pub mod morph;

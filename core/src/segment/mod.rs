@@ -29,7 +29,16 @@
 //! 8 bytes per pixel of the largest region of interest. A region whose
 //! bounding box exceeds the ROI capacity is shrunk about its centre until it
 //! fits ([`SegmentStats::regions_shrunk`]). Stack use per call is a few KiB
-//! (256-entry histograms and lookup tables).
+//! (five 256-entry `u32` histograms and a lookup table in the deepest frame).
+//!
+//! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
+//! `workspace_size(2048, 2048, 1 << 20)` = 18 098 496 bytes (17.3 MiB):
+//! 8 MiB for the two frame buffers, 1 MiB for the morphology ring (sized
+//! for disks up to 31 × 31), about 0.3 MiB of labelling tables and region
+//! records, and 8 MiB of ROI buffers (measured by the
+//! `full_size_frame_with_recommended_capacities` test). Recommended output
+//! capacity: `Objects<64, 16384>` (106 008 bytes; one run per mask row, so
+//! 16384 runs hold 64 fish of 256 rows on average).
 //!
 //! Pixels are integers throughout; f32 (via `libm`, explicitly) is used
 //! only per component or per region (PCA, ellipse spans, ratio histogram).
