@@ -365,3 +365,69 @@ fn full_size_frame_with_recommended_capacities() {
     let runs_used = out.runs.len();
     std::eprintln!("runs used {runs_used} for {} objects", out.items.len());
 }
+
+#[test]
+fn padded_rows_give_the_same_objects() {
+    let (w, h) = (300usize, 200usize);
+    let fish = [Fish {
+        cx: 150.0,
+        cy: 100.0,
+        a: 50.0,
+        b: 14.0,
+        angle: 0.4,
+        contrast: 60.0,
+    }];
+    let img = draw(w, h, &fish, 5.0, true, 17);
+    let stride = w + 13;
+    let mut padded = vec![255u8; stride * h];
+    for y in 0..h {
+        padded[y * stride..y * stride + w].copy_from_slice(&img[y * w..(y + 1) * w]);
+    }
+    let p = Params::for_frame(512);
+    let mut ws = vec![0u8; workspace_size(w, h, w * h)];
+    let mut a: Objects<8, 1024> = Objects::new();
+    let mut b: Objects<8, 1024> = Objects::new();
+    segment_frame(ImageView::packed(&img, w, h).unwrap(), &p, &mut ws, &mut a).unwrap();
+    segment_frame(
+        ImageView::new(&padded, w, h, stride).unwrap(),
+        &p,
+        &mut ws,
+        &mut b,
+    )
+    .unwrap();
+    assert_eq!(a.items.len(), 1);
+    assert_eq!(a.items, b.items);
+    assert_eq!(a.runs, b.runs);
+}
+
+#[test]
+fn full_size_stage_times() {
+    // information only (no timed assertion): where a 2048² frame's time goes
+    let (w, h) = (2048usize, 2048usize);
+    let img = draw(w, h, &school(w), 6.0, true, 21);
+    let v = ImageView::packed(&img, w, h).unwrap();
+    let (mut tmp, mut out) = (vec![0u8; w * h], vec![0u8; w * h]);
+    let disk = crate::morph::Disk::opencv_ellipse(7);
+    let mut scratch = vec![0u8; crate::morph::disk_scratch_len(w, 3)];
+    let t0 = std::time::Instant::now();
+    crate::morph::remove_mesh(v, 7, &mut tmp, &mut out).unwrap();
+    let t1 = std::time::Instant::now();
+    crate::morph::gradient_disk(
+        ImageView::packed(&out, w, h).unwrap(),
+        &disk,
+        &mut tmp,
+        &mut scratch,
+    )
+    .unwrap();
+    let t2 = std::time::Instant::now();
+    let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
+    let mut objs: Box<Objects<64, 16384>> = Box::default();
+    segment_frame(v, &Params::default(), &mut ws, &mut objs).unwrap();
+    let t3 = std::time::Instant::now();
+    std::eprintln!(
+        "2048² stage times: mesh removal {:?}, gradient {:?}, whole segment_frame {:?}",
+        t1 - t0,
+        t2 - t1,
+        t3 - t2
+    );
+}
