@@ -21,6 +21,8 @@
     not(test),
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used, clippy::panic))]
 
 pub mod error;
 pub mod geometry;
@@ -39,3 +41,9 @@ pub use geometry::StereoGeometry;
 pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;
+pub use segment::{segment_frame, workspace_size, SegmentError, SegmentStats};
+pub mod hist;
+pub mod label;
+pub mod morph;
+pub mod segment;
+pub mod threshold;

@@ -13,6 +13,7 @@ pub mod output;
 pub mod params_file;
 pub mod timing;
 pub mod reference_stereo;
+pub mod reference;
 pub mod truth;
 
 pub use error::InputError;

@@ -1,0 +1,115 @@
+//! Grey-level histograms, the ratio histogram of eq. (2) and its
+//! backprojection, eq. (3) (Section III.B).
+//!
+//! A histogram of `n` bins (n a power of two, 2..=256) puts grey level `v`
+//! in bin `v >> (8 − log₂ n)` = `v · n / 256`, OpenCV's `calcHist` with
+//! `ranges = [0, 256]` (uniform bins). Memory bound: the caller's arrays.
+
+/// Bin of grey level `v` in an `bins`-bin histogram (`bins` a power of two
+/// ≤ 256; other values are rounded down to one).
+#[inline]
+pub const fn bin_of(v: u8, bins: usize) -> usize {
+    let shift = 8 - bins_log2(bins);
+    (v as usize) >> shift
+}
+
+/// log₂ of `bins` rounded down, clamped to `0..=8`.
+pub const fn bins_log2(bins: usize) -> u32 {
+    if bins <= 1 {
+        0
+    } else if bins >= 256 {
+        8
+    } else {
+        usize::BITS - 1 - bins.leading_zeros()
+    }
+}
+
+/// Adds every pixel of `row` to a 256-bin histogram.
+#[inline]
+pub fn add_row_256(hist: &mut [u32; 256], row: &[u8]) {
+    for &v in row {
+        hist[v as usize] = hist[v as usize].wrapping_add(1);
+    }
+}
+
+/// Folds a 256-bin histogram into `out.len()` bins (a power of two ≤ 256).
+pub fn fold_bins(hist: &[u32; 256], out: &mut [u32]) {
+    out.fill(0);
+    let bins = out.len();
+    if bins == 0 {
+        return;
+    }
+    for (v, &h) in hist.iter().enumerate() {
+        if let Some(o) = out.get_mut(bin_of(v as u8, bins)) {
+            *o = o.wrapping_add(h);
+        }
+    }
+}
+
+/// The ratio histogram of eq. (2) thresholded by θ_bp (eq. (3)) as a
+/// 256-entry lookup table over grey levels: `lut[v]` is true when
+/// `H_R(bin(v)) = min(H_high / H_low, 1) > θ_bp`.
+///
+/// A bin with `H_low = 0` has no defined ratio; it is taken as 0 (such grey
+/// levels never occur in M_low, so they are not foreground). Since θ_bp < 1
+/// the `min(·, 1)` never changes the decision. `h_high` and `h_low` must have
+/// the same power-of-two length ≤ 256; the comparison is done in f32 per bin
+/// (at most 256 divisions per region, none per pixel).
+pub fn ratio_backprojection_lut(h_high: &[u32], h_low: &[u32], theta_bp: f32) -> [bool; 256] {
+    let mut lut = [false; 256];
+    let bins = h_low.len().min(h_high.len());
+    if bins == 0 {
+        return lut;
+    }
+    for (v, l) in lut.iter_mut().enumerate() {
+        let b = bin_of(v as u8, bins);
+        let (hh, hl) = match (h_high.get(b), h_low.get(b)) {
+            (Some(&hh), Some(&hl)) => (hh, hl),
+            _ => continue,
+        };
+        if hl == 0 {
+            continue;
+        }
+        let ratio = (hh as f32 / hl as f32).min(1.0);
+        *l = ratio > theta_bp;
+    }
+    lut
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_follow_calc_hist() {
+        assert_eq!(bin_of(0, 16), 0);
+        assert_eq!(bin_of(15, 16), 0);
+        assert_eq!(bin_of(16, 16), 1);
+        assert_eq!(bin_of(255, 16), 15);
+        assert_eq!(bin_of(255, 8), 7);
+        assert_eq!(bin_of(255, 32), 31);
+        assert_eq!(bin_of(200, 256), 200);
+        let mut h = [0u32; 256];
+        add_row_256(&mut h, &[0, 1, 17, 255, 255]);
+        let mut f = [0u32; 16];
+        fold_bins(&h, &mut f);
+        assert_eq!((f[0], f[1], f[15]), (2, 1, 2));
+    }
+
+    #[test]
+    fn ratio_lut_of_eq2_eq3() {
+        let mut hl = [0u32; 16];
+        let mut hh = [0u32; 16];
+        hl[3] = 100; // background-dominated bin: ratio 0.1
+        hh[3] = 10;
+        hl[8] = 50; // foreground bin: ratio 0.9
+        hh[8] = 45;
+        hl[9] = 10; // exactly θ: not > θ
+        hh[9] = 3;
+        let lut = ratio_backprojection_lut(&hh, &hl, 0.3);
+        assert!(!lut[3 * 16 + 5]);
+        assert!(lut[8 * 16] && lut[8 * 16 + 15]);
+        assert!(!lut[9 * 16]);
+        assert!(!lut[0] && !lut[255]);
+    }
+}

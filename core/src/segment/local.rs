@@ -1,0 +1,356 @@
+//! Segmentation inside one elliptic local region (Section III.A–D).
+//!
+//! Conventions (the reference in `host/src/reference/segment.rs` follows
+//! the same ones):
+//! - The region is the ellipse `(p·u)²/a² + (p·v)²/b² ≤ 1` around the
+//!   coarse component's centroid, pixel centres at integer coordinates;
+//!   its pixels are found per row as one span. Everything outside the
+//!   ellipse is background and takes no part in any histogram.
+//! - Otsu's τ on the ellipse's 256-bin histogram; τ_low, τ_high by eq. (1)
+//!   ([`crate::threshold::shifted_threshold`]); `M_x = {p > ⌊τ_x⌋}` (the
+//!   OpenCV/imageproc "foreground is p > t" convention).
+//! - Both masks get the 3 × 3 median (replicated ROI border, as
+//!   `cv2.medianBlur`), then are restricted to the ellipse again.
+//! - `H_low`, `H_high`: `hist_bins`-bin histograms of the pixels under the
+//!   two masks; the ratio histogram of eq. (2) backprojected on the
+//!   ellipse and thresholded by θ_bp, eq. (3), gives B.
+//!   Ablations: `double_threshold = false` → B = median(M_τ);
+//!   `backprojection = false` → B = median(M_high).
+//! - Components of B (8-connected): eq. (4) keeps `area_min ≤ A ≤ area_max`,
+//!   eq. (5)–(6) keeps unbiased variance `σ² ≥ var_min`.
+//! - Closing then opening with the `disk_size` disk (Section III.D), OpenCV
+//!   border convention, then components again; eq. (4) is applied once
+//!   more so that fragments split off by the opening are not output.
+//!
+//! Memory bound: the ROI buffers of the workspace (8 bytes per ROI pixel),
+//! one span per ROI row, [`super::MAX_ROI_COMPONENTS`] statistics records;
+//! on the stack two 256-bin histograms and a 256-entry table.
+
+use super::workspace::{RoiBufs, STAT_WORDS};
+use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
+use crate::hist::{bin_of, fold_bins, ratio_backprojection_lut};
+use crate::image::{ImageView, Roi};
+use crate::label::{label_components, Moments};
+use crate::morph::{close_disk_in_place, median3_binary, open_disk_in_place, Disk};
+use crate::object::{Objects, HIST_BINS};
+use crate::params::Params;
+use crate::threshold::{lower_class_mean, otsu, shifted_threshold};
+
+/// Bounding box (clipped to the frame) of an ellipse.
+pub fn ellipse_roi(r: &Region, width: usize, height: usize) -> Roi {
+    let (c, s) = (libm::cosf(r.angle), libm::sinf(r.angle));
+    let ex = libm::sqrtf(r.a * r.a * c * c + r.b * r.b * s * s);
+    let ey = libm::sqrtf(r.a * r.a * s * s + r.b * r.b * c * c);
+    let clip = |v: f32, hi: usize| -> u32 {
+        if !v.is_finite() || v < 0.0 {
+            0
+        } else if v > hi as f32 {
+            hi as u32
+        } else {
+            v as u32
+        }
+    };
+    let x0 = clip(libm::ceilf(r.cx - ex), width);
+    let x1 = clip(libm::floorf(r.cx + ex) + 1.0, width);
+    let y0 = clip(libm::ceilf(r.cy - ey), height);
+    let y1 = clip(libm::floorf(r.cy + ey) + 1.0, height);
+    if x1 <= x0 || y1 <= y0 {
+        Roi::default()
+    } else {
+        Roi::new(x0, y0, x1 - x0, y1 - y0)
+    }
+}
+
+/// Columns `[x0, x1)` (ROI coordinates) of the ellipse on each ROI row.
+fn ellipse_spans(r: &Region, roi: Roi, spans: &mut [[i32; 2]]) {
+    let (c, s) = (libm::cosf(r.angle), libm::sinf(r.angle));
+    let (ia2, ib2) = (1.0 / (r.a * r.a), 1.0 / (r.b * r.b));
+    let qa = c * c * ia2 + s * s * ib2;
+    for (j, sp) in spans.iter_mut().enumerate().take(roi.h as usize) {
+        *sp = [0, 0];
+        let dy = (roi.y as usize + j) as f32 - r.cy;
+        let qb = 2.0 * dy * c * s * (ia2 - ib2);
+        let qc = dy * dy * (s * s * ia2 + c * c * ib2) - 1.0;
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc.is_nan() || disc < 0.0 || qa.is_nan() || qa <= 0.0 {
+            continue;
+        }
+        let sq = libm::sqrtf(disc);
+        let d1 = (-qb - sq) / (2.0 * qa);
+        let d2 = (-qb + sq) / (2.0 * qa);
+        let xl = libm::ceilf(r.cx + d1) - roi.x as f32;
+        let xr = libm::floorf(r.cx + d2) - roi.x as f32 + 1.0;
+        let xl = xl.clamp(0.0, roi.w as f32) as i32;
+        let xr = xr.clamp(0.0, roi.w as f32) as i32;
+        if xr > xl {
+            *sp = [xl, xr];
+        }
+    }
+}
+
+fn view(buf: &[u8], rw: usize, rh: usize) -> Result<ImageView<'_>, SegmentError> {
+    ImageView::packed(buf, rw, rh).map_err(SegmentError::Image)
+}
+
+/// Clears `rec` to an empty statistics record.
+fn clear_rec(rec: &mut [u64; STAT_WORDS]) {
+    *rec = [0; STAT_WORDS];
+    Moments::EMPTY.to_words(&mut rec[..10]);
+}
+
+/// Segments one region and emits its objects into `out`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn segment_region<const N: usize, const R: usize>(
+    frame: ImageView<'_>,
+    region: &Region,
+    params: &Params,
+    bufs: &mut RoiBufs<'_>,
+    spans: &mut [[i32; 2]],
+    recs: &mut [[u64; STAT_WORDS]],
+    disk_scratch: &mut [u8],
+    out: &mut Objects<N, R>,
+    stats: &mut SegmentStats,
+    trace: &mut dyn FnMut(&RegionTrace),
+) -> Result<(), SegmentError> {
+    let (fw, fh) = (frame.width(), frame.height());
+    let mut reg = *region;
+    let mut roi = ellipse_roi(&reg, fw, fh);
+    let mut tries = 0;
+    while roi.area() as usize > bufs.max_pixels && tries < 8 {
+        let f = libm::sqrtf(bufs.max_pixels as f32 / roi.area() as f32) * 0.98;
+        reg.a *= f;
+        reg.b *= f;
+        roi = ellipse_roi(&reg, fw, fh);
+        tries += 1;
+    }
+    if tries > 0 {
+        stats.regions_shrunk += 1;
+    }
+    let n = roi.area() as usize;
+    if roi.is_empty() || n > bufs.max_pixels {
+        stats.regions_empty += 1;
+        return Ok(());
+    }
+    let (rw, rh) = (roi.w as usize, roi.h as usize);
+    let spans = spans.get_mut(..rh).ok_or(SegmentError::WorkspaceTooSmall)?;
+    ellipse_spans(&reg, roi, spans);
+    let pv = frame.sub(roi).map_err(SegmentError::Image)?;
+    let inside = |sp: &[i32; 2], i: usize| (i as i32) >= sp[0] && (i as i32) < sp[1];
+
+    // --- double local thresholding, eq. (1) ---
+    let mut h256 = [0u32; 256];
+    let mut total = 0u64;
+    for (j, sp) in spans.iter().enumerate() {
+        let row = pv.row(j);
+        for &p in row.get(sp[0] as usize..sp[1] as usize).unwrap_or(&[]) {
+            h256[p as usize] += 1;
+            total += 1;
+        }
+    }
+    if total == 0 {
+        stats.regions_empty += 1;
+        return Ok(());
+    }
+    if total < params.area_min as u64 {
+        // no object inside the ellipse can pass eq. (4)
+        stats.regions_small += 1;
+        return Ok(());
+    }
+    let tau = otsu(&h256);
+    let (t_low, t_high) = if params.double_threshold {
+        let mu = lower_class_mean(&h256, tau);
+        (
+            shifted_threshold(tau, mu, params.p_low),
+            shifted_threshold(tau, mu, params.p_high),
+        )
+    } else {
+        (tau, tau)
+    };
+    trace(&RegionTrace {
+        region: reg,
+        roi,
+        tau,
+        t_low,
+        t_high,
+    });
+    let a = bufs.a.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let b = bufs.b.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let c = bufs.c.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let d = bufs.d.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let labels = bufs
+        .labels
+        .get_mut(..n)
+        .ok_or(SegmentError::WorkspaceTooSmall)?;
+    for (j, sp) in spans.iter().enumerate() {
+        let row = pv.row(j);
+        let (ra, rb) = (&mut a[j * rw..(j + 1) * rw], &mut b[j * rw..(j + 1) * rw]);
+        for (i, &p) in row.iter().enumerate().take(rw) {
+            let ins = inside(sp, i);
+            ra[i] = if ins && p > t_low { 255 } else { 0 };
+            rb[i] = if ins && p > t_high { 255 } else { 0 };
+        }
+    }
+    // 3 × 3 median on both masks, restricted to the ellipse again
+    median3_binary(view(a, rw, rh)?, c).map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    median3_binary(view(b, rw, rh)?, d).map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    for (j, sp) in spans.iter().enumerate() {
+        for i in 0..rw {
+            if !inside(sp, i) {
+                c[j * rw + i] = 0;
+                d[j * rw + i] = 0;
+            }
+        }
+    }
+
+    // --- histogram backprojection, eq. (2)–(3): B into `a` ---
+    if params.double_threshold && params.backprojection {
+        let (mut hl, mut hh) = ([0u32; 256], [0u32; 256]);
+        for j in 0..rh {
+            let row = pv.row(j);
+            for (i, &p) in row.iter().enumerate().take(rw) {
+                let k = j * rw + i;
+                hl[p as usize] += (c[k] != 0) as u32;
+                hh[p as usize] += (d[k] != 0) as u32;
+            }
+        }
+        let bins = (params.hist_bins as usize).clamp(1, 256);
+        let (mut bl, mut bh) = ([0u32; 256], [0u32; 256]);
+        fold_bins(&hl, &mut bl[..bins]);
+        fold_bins(&hh, &mut bh[..bins]);
+        let lut = ratio_backprojection_lut(&bh[..bins], &bl[..bins], params.theta_bp);
+        for (j, sp) in spans.iter().enumerate() {
+            let row = pv.row(j);
+            for (i, &p) in row.iter().enumerate().take(rw) {
+                a[j * rw + i] = if inside(sp, i) && lut[p as usize] {
+                    255
+                } else {
+                    0
+                };
+            }
+        }
+    } else {
+        a.copy_from_slice(d);
+    }
+
+    // --- area and variance rejection, eq. (4)–(6): accepted mask into `b` ---
+    let (amin, amax) = (params.area_min, params.area_max);
+    let mut rej_area = 0u32;
+    let n1 = label_components(view(a, rw, rh)?, labels, |ar| {
+        let ok = ar >= amin && ar <= amax;
+        rej_area += !ok as u32;
+        ok
+    })
+    .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    stats.rejected_area += rej_area;
+
+    let cap = recs.len().min(super::MAX_ROI_COMPONENTS);
+    let n1s = (n1 as usize).min(cap);
+    stats.label_overflow += n1 - n1s as u32;
+    for rec in recs.iter_mut().take(n1s) {
+        clear_rec(rec);
+    }
+    for j in 0..rh {
+        let row = pv.row(j);
+        for (i, &p) in row.iter().enumerate().take(rw) {
+            let l = labels[j * rw + i];
+            if l > 0 {
+                if let Some(rec) = recs.get_mut(l as usize - 1).filter(|_| (l as usize) <= n1s) {
+                    rec[0] += 1;
+                    rec[10] += p as u64;
+                    rec[11] += p as u64 * p as u64;
+                }
+            }
+        }
+    }
+    // accepted flag in word 27
+    for rec in recs.iter_mut().take(n1s) {
+        let (cnt, s1, s2) = (rec[0] as f64, rec[10] as f64, rec[11] as f64);
+        let var = if cnt > 1.0 {
+            (s2 - s1 * s1 / cnt) / (cnt - 1.0)
+        } else {
+            0.0
+        };
+        let ok = !params.variance_rejection || var >= params.var_min as f64;
+        if !ok {
+            stats.rejected_variance += 1;
+        }
+        rec[STAT_WORDS - 1] = ok as u64;
+    }
+    let mut any = false;
+    for (bv, &l) in b.iter_mut().zip(labels.iter()) {
+        let keep = l > 0
+            && (l as usize) <= n1s
+            && recs
+                .get(l as usize - 1)
+                .is_some_and(|r| r[STAT_WORDS - 1] == 1);
+        *bv = if keep { 255 } else { 0 };
+        any |= keep;
+    }
+    if !any {
+        return Ok(());
+    }
+
+    // --- post-processing, Section III.D: closing then opening ---
+    let disk = Disk::opencv_ellipse(params.disk_size);
+    close_disk_in_place(b, rw, rh, &disk, c, disk_scratch)
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    open_disk_in_place(b, rw, rh, &disk, c, disk_scratch)
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+
+    // --- final components and their statistics ---
+    let n2 = label_components(view(b, rw, rh)?, labels, |ar| ar >= amin && ar <= amax)
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    let n2s = (n2 as usize).min(cap);
+    stats.label_overflow += n2 - n2s as u32;
+    for rec in recs.iter_mut().take(n2s) {
+        clear_rec(rec);
+    }
+    for j in 0..rh {
+        let row = pv.row(j);
+        let lrow = &labels[j * rw..(j + 1) * rw];
+        let y = roi.y + j as u32;
+        let mut i = 0usize;
+        while i < rw {
+            let l = lrow[i];
+            if l <= 0 || l as usize > n2s {
+                i += 1;
+                continue;
+            }
+            let i0 = i;
+            let Some(rec) = recs.get_mut(l as usize - 1) else {
+                i += 1;
+                continue;
+            };
+            while i < rw && lrow[i] == l {
+                let p = row.get(i).copied().unwrap_or(0);
+                rec[10] += p as u64;
+                rec[11] += p as u64 * p as u64;
+                rec[12 + bin_of(p, HIST_BINS)] += 1;
+                i += 1;
+            }
+            let mut m = Moments::from_words(&rec[..10]);
+            m.add_run(y, roi.x + i0 as u32, roi.x + i as u32);
+            m.to_words(&mut rec[..10]);
+        }
+    }
+    for k in 0..n2s {
+        let Some(rec) = recs.get(k) else { break };
+        let mut hist = [0u32; HIST_BINS];
+        for (hv, &r) in hist.iter_mut().zip(&rec[12..12 + HIST_BINS]) {
+            *hv = r as u32;
+        }
+        let cand = Candidate {
+            m: Moments::from_words(&rec[..10]),
+            sum: rec[10],
+            sumsq: rec[11],
+            hist,
+        };
+        let mask = MaskRef {
+            labels,
+            roi,
+            label: k as i32 + 1,
+        };
+        emit(out, &cand, &mask, stats);
+    }
+    Ok(())
+}

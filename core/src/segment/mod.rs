@@ -1,0 +1,449 @@
+//! Automatic fish segmentation (Section III, Fig. 2; mesh removal of
+//! Section V.A) on one rectified 8-bit frame.
+//!
+//! Stages, data flowing one way:
+//! 1. [`coarse`]: trawl-mesh removal, 7 × 7 morphological gradient, global
+//!    threshold, connected components → elliptic local regions (III.A).
+//! 2. [`local`], per region: double local thresholding (eq. (1)), 3 × 3
+//!    median, histogram backprojection (eq. (2)–(3)), area and variance
+//!    rejection (eq. (4)–(6)), closing then opening (III.D).
+//! 3. Here: the objects of all regions are merged into one
+//!    [`Objects`] set — duplicates removed, capacity enforced.
+//!
+//! **One fish, one object.** Elliptic regions of neighbouring fish overlap,
+//! so a fish can be segmented in several regions (whole in its own, often
+//! cut by the ellipse in a neighbour's). A new object whose mask shares
+//! more than half of the smaller mask's pixels with an object already
+//! emitted is the same fish: the larger of the two is kept (on a tie the
+//! first), the other counted in [`SegmentStats::duplicates`]. The cut-off
+//! partial copy is always the smaller, so the whole fish survives.
+//!
+//! **Capacity.** `Objects<N, R>` holds `N` objects and `R` mask runs. When
+//! either is full, the smallest objects go first (an incoming object smaller
+//! than everything kept is itself dropped); every drop is counted in
+//! `Objects::dropped` and [`SegmentStats::dropped`].
+//!
+//! **Memory.** All scratch lives in the caller's workspace of
+//! [`workspace_size`]`(width, height, max_roi_pixels)` bytes: two frame
+//! buffers (mesh-free frame, gradient), `O(width)` labelling tables, and
+//! 8 bytes per pixel of the largest region of interest. A region whose
+//! bounding box exceeds the ROI capacity is shrunk about its centre until it
+//! fits ([`SegmentStats::regions_shrunk`]). Stack use per call is a few KiB
+//! (five 256-entry `u32` histograms and a lookup table in the deepest frame).
+//!
+//! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
+//! `workspace_size(2048, 2048, 1 << 20)` = 18 098 496 bytes (17.3 MiB):
+//! 8 MiB for the two frame buffers, 1 MiB for the morphology ring (sized
+//! for disks up to 31 × 31), about 0.3 MiB of labelling tables and region
+//! records, and 8 MiB of ROI buffers (measured by the
+//! `full_size_frame_with_recommended_capacities` test). Recommended output
+//! capacity: `Objects<64, 16384>` (106 008 bytes; one run per mask row, so
+//! 16384 runs hold 64 fish of 256 rows on average).
+//!
+//! Pixels are integers throughout; f32 (via `libm`, explicitly) is used
+//! only per component or per region (PCA, ellipse spans, ratio histogram).
+
+pub mod coarse;
+pub mod local;
+mod workspace;
+
+pub use workspace::{
+    fixed_size, workspace_size, BYTES_PER_ROI_PIXEL, MAX_REGIONS, MAX_ROI_COMPONENTS,
+};
+
+use crate::error::{ImageError, ParamError};
+use crate::image::{ImageView, Roi};
+use crate::label::Moments;
+use crate::object::{Object, Objects, OrientedBox, Run, RunSpan, HIST_BINS};
+use crate::params::Params;
+
+/// The ROI capacity this crate recommends for 2048 × 2048 frames: 1 Mpx
+/// (1024 × 1024), the bounding box of a 1.5×-enlarged ellipse around a fish
+/// about 700 px long at any angle.
+pub const RECOMMENDED_MAX_ROI_PIXELS: usize = 1 << 20;
+
+/// An elliptic local region (Section III.A), frame coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Region {
+    /// Centre x.
+    pub cx: f32,
+    /// Centre y.
+    pub cy: f32,
+    /// Semi-axis along the first principal axis (already enlarged).
+    pub a: f32,
+    /// Semi-axis along the second principal axis (already enlarged).
+    pub b: f32,
+    /// Angle of the first principal axis from +x, radians (y down).
+    pub angle: f32,
+    /// Pixels of the coarse component.
+    pub coarse_area: u32,
+}
+
+/// Why a frame could not be segmented at all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum SegmentError {
+    /// The parameters are invalid.
+    Params(ParamError),
+    /// The frame is unusable.
+    Image(ImageError),
+    /// The frame is wider or taller than 65535 pixels (mask runs are `u16`).
+    FrameTooLarge,
+    /// The workspace is smaller than [`fixed_size`] plus alignment.
+    WorkspaceTooSmall,
+}
+
+impl core::fmt::Display for SegmentError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SegmentError::Params(e) => write!(f, "segmentation: {e}"),
+            SegmentError::Image(e) => write!(f, "segmentation: {e}"),
+            SegmentError::FrameTooLarge => write!(f, "segmentation: frame larger than 65535 px"),
+            SegmentError::WorkspaceTooSmall => write!(f, "segmentation: workspace too small"),
+        }
+    }
+}
+
+impl core::error::Error for SegmentError {}
+
+/// Per-step counters of one [`segment_frame`] call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SegmentStats {
+    /// Global threshold applied to the morphological gradient.
+    pub gradient_threshold: u8,
+    /// Connected components of the thresholded gradient.
+    pub coarse_components: u32,
+    /// Of those, skipped as smaller than `area_min / 4`.
+    pub coarse_small: u32,
+    /// Regions processed.
+    pub regions: u32,
+    /// Regions not kept because [`MAX_REGIONS`] was reached (smallest first).
+    pub regions_dropped: u32,
+    /// Regions shrunk to fit the ROI capacity.
+    pub regions_shrunk: u32,
+    /// Regions skipped: no pixel inside, or no ROI capacity at all.
+    pub regions_empty: u32,
+    /// Regions skipped because the ellipse holds fewer than `area_min`
+    /// pixels (no object in it could pass eq. (4)).
+    pub regions_small: u32,
+    /// Components rejected by area, eq. (4) (speckle included).
+    pub rejected_area: u32,
+    /// Components rejected by variance, eq. (5)–(6).
+    pub rejected_variance: u32,
+    /// Components past [`MAX_ROI_COMPONENTS`] in one region (not examined).
+    pub label_overflow: u32,
+    /// Objects of the same fish found in overlapping regions (removed).
+    pub duplicates: u32,
+    /// Objects dropped by the `N`/`R` capacity of [`Objects`].
+    pub dropped: u32,
+    /// Objects output.
+    pub objects: u32,
+}
+
+/// One object candidate from a region, before it enters [`Objects`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Candidate {
+    pub m: Moments,
+    pub sum: u64,
+    pub sumsq: u64,
+    pub hist: [u32; HIST_BINS],
+}
+
+/// Where a candidate's mask is: pixels of `labels` (ROI `roi`, packed with
+/// width `roi.w`) equal to `label`.
+pub(crate) struct MaskRef<'a> {
+    pub labels: &'a [i32],
+    pub roi: Roi,
+    pub label: i32,
+}
+
+impl MaskRef<'_> {
+    fn at(&self, x: u32, y: u32) -> bool {
+        if !self.roi.contains(x, y) {
+            return false;
+        }
+        let i = (y - self.roi.y) as usize * self.roi.w as usize + (x - self.roi.x) as usize;
+        self.labels.get(i).is_some_and(|&l| l == self.label)
+    }
+}
+
+/// What happened in one region, for tracing and for `fishtrack compare`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RegionTrace {
+    /// The region (after any shrinking to the ROI capacity).
+    pub region: Region,
+    /// Its bounding box.
+    pub roi: Roi,
+    /// Otsu's τ on the ellipse's pixels.
+    pub tau: u8,
+    /// ⌊τ_low⌋ of eq. (1).
+    pub t_low: u8,
+    /// ⌊τ_high⌋ of eq. (1).
+    pub t_high: u8,
+}
+
+/// Segments `img` (a rectified 8-bit frame) into `out`.
+///
+/// `ws` must hold at least [`workspace_size`]`(width, height, m)` bytes;
+/// whatever exceeds the frame part becomes ROI capacity `m`.
+pub fn segment_frame<const N: usize, const R: usize>(
+    img: ImageView<'_>,
+    params: &Params,
+    ws: &mut [u8],
+    out: &mut Objects<N, R>,
+) -> Result<SegmentStats, SegmentError> {
+    segment_frame_traced(img, params, ws, out, &mut |_| {})
+}
+
+/// [`segment_frame`], calling `trace` for every region that reaches the
+/// thresholding step.
+pub fn segment_frame_traced<const N: usize, const R: usize>(
+    img: ImageView<'_>,
+    params: &Params,
+    ws: &mut [u8],
+    out: &mut Objects<N, R>,
+    trace: &mut dyn FnMut(&RegionTrace),
+) -> Result<SegmentStats, SegmentError> {
+    out.clear();
+    params.validate().map_err(SegmentError::Params)?;
+    let (w, h) = (img.width(), img.height());
+    if w > u16::MAX as usize || h > u16::MAX as usize {
+        return Err(SegmentError::FrameTooLarge);
+    }
+    let mut ws = workspace::Ws::carve(ws, w, h).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let mut stats = SegmentStats::default();
+    let n_regions = coarse::coarse_regions(img, params, &mut ws, &mut stats)?;
+    let n = w * h;
+    let frame = ImageView::packed(&ws.filtered[..n], w, h).map_err(SegmentError::Image)?;
+    for rw in ws.regions.iter().take(n_regions) {
+        let region = coarse::decode_region(rw);
+        stats.regions += 1;
+        local::segment_region(
+            frame,
+            &region,
+            params,
+            &mut ws.roi,
+            ws.spans,
+            ws.stats,
+            ws.disk,
+            out,
+            &mut stats,
+            trace,
+        )?;
+    }
+    compact_runs(out);
+    stats.objects = out.items.len() as u32;
+    stats.dropped = out.dropped;
+    Ok(stats)
+}
+
+/// Number of pixels of `obj` (runs in `pool`) that are in `mask`.
+fn overlap(pool: &[Run], obj: &Object, mask: &MaskRef<'_>) -> u32 {
+    let s = obj.runs.start as usize;
+    let e = s.saturating_add(obj.runs.len as usize);
+    let mut n = 0u32;
+    for r in pool.get(s..e).unwrap_or(&[]) {
+        let y = r.y as u32;
+        if y < mask.roi.y || y >= mask.roi.bottom() {
+            continue;
+        }
+        let x0 = (r.x0 as u32).max(mask.roi.x);
+        let x1 = (r.x1 as u32).min(mask.roi.right());
+        for x in x0..x1 {
+            n += mask.at(x, y) as u32;
+        }
+    }
+    n
+}
+
+/// Moves the runs of the kept objects to the front of the pool.
+pub(crate) fn compact_runs<const N: usize, const R: usize>(out: &mut Objects<N, R>) {
+    out.items.sort_unstable_by_key(|o| o.runs.start);
+    let mut next = 0usize;
+    for o in out.items.iter_mut() {
+        let s = o.runs.start as usize;
+        let l = o.runs.len as usize;
+        if s != next && s.saturating_add(l) <= out.runs.len() {
+            out.runs.copy_within(s..s + l, next);
+        }
+        o.runs.start = next as u32;
+        next += l;
+    }
+    out.runs.truncate(next.min(out.runs.len()));
+}
+
+fn smallest<const N: usize, const R: usize>(out: &Objects<N, R>) -> Option<(usize, u32)> {
+    let mut best: Option<(usize, u32)> = None;
+    for (i, o) in out.items.iter().enumerate() {
+        if best.is_none_or(|(_, a)| o.area < a) {
+            best = Some((i, o.area));
+        }
+    }
+    best
+}
+
+/// Adds a candidate to `out`: duplicate rule, then capacity rule (see the
+/// module documentation).
+pub(crate) fn emit<const N: usize, const R: usize>(
+    out: &mut Objects<N, R>,
+    cand: &Candidate,
+    mask: &MaskRef<'_>,
+    stats: &mut SegmentStats,
+) {
+    let m = &cand.m;
+    let area = m.area.min(u32::MAX as u64) as u32;
+    if area == 0 {
+        return;
+    }
+    let bbox = Roi::new(
+        m.x_min,
+        m.y_min,
+        m.x_max - m.x_min + 1,
+        m.y_max - m.y_min + 1,
+    );
+    // duplicates: remove smaller copies, give up if a larger one exists
+    loop {
+        let mut smaller_dup = None;
+        for (i, o) in out.items.iter().enumerate() {
+            if o.bbox.intersect(&bbox).is_empty() {
+                continue;
+            }
+            let ov = overlap(&out.runs, o, mask) as u64;
+            if 2 * ov > o.area.min(area) as u64 {
+                if o.area >= area {
+                    stats.duplicates += 1;
+                    return;
+                }
+                smaller_dup = Some(i);
+                break;
+            }
+        }
+        match smaller_dup {
+            Some(i) => {
+                out.items.swap_remove(i);
+                stats.duplicates += 1;
+            }
+            None => break,
+        }
+    }
+    // runs of the candidate
+    let mut n_runs = 0usize;
+    for y in bbox.y..bbox.bottom() {
+        let mut inside = false;
+        for x in bbox.x..bbox.right() {
+            let v = mask.at(x, y);
+            if v && !inside {
+                n_runs += 1;
+            }
+            inside = v;
+        }
+    }
+    // capacity: objects
+    if out.items.len() >= N {
+        match smallest(out) {
+            Some((i, a)) if a < area => {
+                out.items.swap_remove(i);
+                out.dropped += 1;
+            }
+            _ => {
+                out.dropped += 1;
+                return;
+            }
+        }
+    }
+    // capacity: runs
+    if out.runs.len() + n_runs > R {
+        compact_runs(out);
+        while out.runs.len() + n_runs > R {
+            match smallest(out) {
+                Some((i, a)) if a < area => {
+                    out.items.swap_remove(i);
+                    out.dropped += 1;
+                    compact_runs(out);
+                }
+                _ => {
+                    out.dropped += 1;
+                    return;
+                }
+            }
+        }
+    }
+    // append runs, measure the oriented box on them
+    let (cx, cy) = m.centroid();
+    let (angle, _, _) = m.principal_axes();
+    let (c, s) = (libm::cosf(angle), libm::sinf(angle));
+    let (mut umin, mut umax, mut vmin, mut vmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+    let start = out.runs.len();
+    for y in bbox.y..bbox.bottom() {
+        let mut x = bbox.x;
+        while x < bbox.right() {
+            if !mask.at(x, y) {
+                x += 1;
+                continue;
+            }
+            let x0 = x;
+            while x < bbox.right() && mask.at(x, y) {
+                x += 1;
+            }
+            let run = Run {
+                y: y as u16,
+                x0: x0 as u16,
+                x1: x as u16,
+            };
+            if out.runs.push(run).is_err() {
+                break; // cannot happen: room was made above
+            }
+            for (px, py) in [
+                (x0 as f32 - 0.5, y as f32 - 0.5),
+                (x0 as f32 - 0.5, y as f32 + 0.5),
+                (x as f32 - 0.5, y as f32 - 0.5),
+                (x as f32 - 0.5, y as f32 + 0.5),
+            ] {
+                let (dx, dy) = (px - cx, py - cy);
+                let u = dx * c + dy * s;
+                let v = -dx * s + dy * c;
+                umin = umin.min(u);
+                umax = umax.max(u);
+                vmin = vmin.min(v);
+                vmax = vmax.max(v);
+            }
+        }
+    }
+    let (um, vm) = (0.5 * (umin + umax), 0.5 * (vmin + vmax));
+    let obb = OrientedBox {
+        cx: cx + um * c - vm * s,
+        cy: cy + um * s + vm * c,
+        half_w: 0.5 * (umax - umin),
+        half_h: 0.5 * (vmax - vmin),
+        angle,
+    };
+    let n = m.area as f64;
+    let mean = cand.sum as f64 / n;
+    let variance = if m.area > 1 {
+        ((cand.sumsq as f64 - cand.sum as f64 * mean) / (n - 1.0)).max(0.0)
+    } else {
+        0.0
+    };
+    let obj = Object {
+        bbox,
+        obb,
+        area,
+        mean: mean as f32,
+        variance: variance as f32,
+        hist: cand.hist,
+        runs: RunSpan {
+            start: start as u32,
+            len: (out.runs.len() - start) as u32,
+        },
+    };
+    if out.items.push(obj).is_err() {
+        out.dropped += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,437 @@
+//! Segmentation tests on drawn frames: fish-like ellipses with texture,
+//! an illumination gradient, noise and a diagonal trawl mesh.
+
+use super::*;
+use proptest::prelude::*;
+use std::boxed::Box;
+use std::vec;
+use std::vec::Vec;
+
+/// A drawn fish: centre, semi-axes, angle, body contrast.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Fish {
+    pub cx: f32,
+    pub cy: f32,
+    pub a: f32,
+    pub b: f32,
+    pub angle: f32,
+    pub contrast: f32,
+}
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f32 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+    /// Approximately normal (sum of 4 uniforms), unit variance.
+    fn gauss(&mut self) -> f32 {
+        (self.next() + self.next() + self.next() + self.next() - 2.0) * 1.732
+    }
+}
+
+/// Draws a `w × h` frame: background 50 + horizontal illumination ramp,
+/// Gaussian noise σ = `noise`, fish bodies brighter by `contrast` with a
+/// dimmer tail third and ±10 texture stripes, and (optionally) a bright
+/// diagonal mesh in the top and bottom sixths.
+pub(crate) fn draw(
+    w: usize,
+    h: usize,
+    fish: &[Fish],
+    noise: f32,
+    mesh: bool,
+    seed: u64,
+) -> Vec<u8> {
+    let mut rng = Lcg(seed);
+    let mut img = vec![0u8; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let mut v = 50.0 + 30.0 * x as f32 / w as f32;
+            if mesh
+                && (y < h / 6 || y > 5 * h / 6)
+                && ((x + y) % 24 < 2 || (x + 4 * (w + h) - y) % 24 < 2)
+            {
+                v += 90.0;
+            }
+            for f in fish {
+                let (dx, dy) = (x as f32 - f.cx, y as f32 - f.cy);
+                let (c, s) = (f.angle.cos(), f.angle.sin());
+                let u = dx * c + dy * s;
+                let vv = -dx * s + dy * c;
+                if u * u / (f.a * f.a) + vv * vv / (f.b * f.b) <= 1.0 {
+                    let tail = if u < -f.a / 3.0 { 0.6 } else { 1.0 };
+                    let stripe = if ((u / 4.0) as i32) % 2 == 0 {
+                        6.0
+                    } else {
+                        -6.0
+                    };
+                    v = 50.0 + 30.0 * x as f32 / w as f32 + f.contrast * tail + stripe;
+                }
+            }
+            v += noise * rng.gauss();
+            img[y * w + x] = v.clamp(0.0, 255.0) as u8;
+        }
+    }
+    img
+}
+
+pub(crate) fn school(w: usize) -> Vec<Fish> {
+    let s = w as f32 / 512.0;
+    vec![
+        Fish {
+            cx: 120.0 * s,
+            cy: 200.0 * s,
+            a: 60.0 * s,
+            b: 16.0 * s,
+            angle: 0.2,
+            contrast: 60.0,
+        },
+        Fish {
+            cx: 330.0 * s,
+            cy: 160.0 * s,
+            a: 45.0 * s,
+            b: 13.0 * s,
+            angle: -0.6,
+            contrast: 45.0,
+        },
+        Fish {
+            cx: 380.0 * s,
+            cy: 330.0 * s,
+            a: 70.0 * s,
+            b: 18.0 * s,
+            angle: 2.5,
+            contrast: 70.0,
+        },
+        Fish {
+            cx: 150.0 * s,
+            cy: 360.0 * s,
+            a: 40.0 * s,
+            b: 12.0 * s,
+            angle: 1.2,
+            contrast: 40.0,
+        },
+    ]
+}
+
+fn run<const N: usize, const R: usize>(
+    img: &[u8],
+    w: usize,
+    h: usize,
+    p: &Params,
+    out: &mut Objects<N, R>,
+) -> SegmentStats {
+    let mut ws = vec![0u8; workspace_size(w, h, 256 * 256)];
+    segment_frame(ImageView::packed(img, w, h).unwrap(), p, &mut ws, out).unwrap()
+}
+
+/// The object whose centroid is nearest to the fish centre.
+fn nearest<'a>(objs: &'a [Object], f: &Fish) -> Option<&'a Object> {
+    objs.iter().min_by(|a, b| {
+        let d = |o: &Object| (o.obb.cx - f.cx).powi(2) + (o.obb.cy - f.cy).powi(2);
+        d(a).total_cmp(&d(b))
+    })
+}
+
+#[test]
+fn finds_each_fish_once_with_its_length() {
+    let (w, h) = (512, 512);
+    let fish = school(w);
+    let img = draw(w, h, &fish, 6.0, true, 7);
+    let p = Params::for_frame(w as u32);
+    let mut out: Objects<32, 8192> = Objects::new();
+    let st = run(&img, w, h, &p, &mut out);
+    assert_eq!(out.items.len(), fish.len(), "{st:?}\n{:?}", out.items);
+    for f in &fish {
+        let o = nearest(&out.items, f).unwrap();
+        let d = ((o.obb.cx - f.cx).powi(2) + (o.obb.cy - f.cy).powi(2)).sqrt();
+        assert!(d < 0.15 * f.a, "centre off by {d} for {f:?}: {o:?}");
+        let len = 2.0 * o.obb.half_w;
+        let err = (len - 2.0 * f.a).abs() / (2.0 * f.a);
+        assert!(err < 0.08, "length {len} vs {} for {f:?}", 2.0 * f.a);
+        // masks are consistent with the statistics
+        let runs = out.runs_of(o);
+        assert_eq!(runs.iter().map(|r| r.len()).sum::<u32>(), o.area);
+        assert!(o.variance >= p.var_min);
+        assert_eq!(o.hist.iter().sum::<u32>(), o.area);
+    }
+    assert_eq!(st.objects as usize, out.items.len());
+    assert_eq!(out.dropped, 0);
+}
+
+#[test]
+fn mesh_alone_and_flat_frames_give_nothing() {
+    let (w, h) = (256, 256);
+    let p = Params::for_frame(w as u32);
+    let mut out: Objects<16, 4096> = Objects::new();
+    let img = draw(w, h, &[], 5.0, true, 3);
+    let st = run(&img, w, h, &p, &mut out);
+    assert_eq!(out.items.len(), 0, "{st:?} {:?}", out.items);
+    for v in [0u8, 255, 128] {
+        let img = vec![v; w * h];
+        run(&img, w, h, &p, &mut out);
+        assert!(out.items.is_empty());
+    }
+    // 1 × 1 frame
+    let mut ws = vec![0u8; workspace_size(1, 1, 16)];
+    let st = segment_frame(
+        ImageView::packed(&[9], 1, 1).unwrap(),
+        &p,
+        &mut ws,
+        &mut out,
+    )
+    .unwrap();
+    assert_eq!(st.objects, 0);
+}
+
+#[test]
+fn capacity_keeps_the_largest() {
+    let (w, h) = (512, 512);
+    let fish = school(w);
+    let img = draw(w, h, &fish, 6.0, false, 11);
+    let p = Params::for_frame(w as u32);
+    let mut all: Objects<32, 8192> = Objects::new();
+    run(&img, w, h, &p, &mut all);
+    let mut two: Objects<2, 8192> = Objects::new();
+    let st = run(&img, w, h, &p, &mut two);
+    assert_eq!(two.items.len(), 2);
+    assert_eq!(two.dropped as usize, all.items.len() - 2);
+    assert_eq!(st.dropped, two.dropped);
+    let mut areas: Vec<u32> = all.items.iter().map(|o| o.area).collect();
+    areas.sort_unstable_by(|a, b| b.cmp(a));
+    let mut kept: Vec<u32> = two.items.iter().map(|o| o.area).collect();
+    kept.sort_unstable_by(|a, b| b.cmp(a));
+    assert_eq!(kept, areas[..2].to_vec());
+    // run capacity: too few runs for the largest fish drops objects, no panic
+    let mut few: Objects<32, 64> = Objects::new();
+    let st = run(&img, w, h, &p, &mut few);
+    assert!(few.dropped > 0 && few.runs.len() <= 64, "{st:?}");
+    for o in &few.items {
+        assert_eq!(few.runs_of(o).iter().map(|r| r.len()).sum::<u32>(), o.area);
+    }
+}
+
+#[test]
+fn overlapping_regions_do_not_duplicate() {
+    // two fish close together: their enlarged ellipses overlap
+    let (w, h) = (384, 256);
+    let fish = [
+        Fish {
+            cx: 150.0,
+            cy: 120.0,
+            a: 50.0,
+            b: 14.0,
+            angle: 0.0,
+            contrast: 60.0,
+        },
+        Fish {
+            cx: 230.0,
+            cy: 160.0,
+            a: 45.0,
+            b: 12.0,
+            angle: 0.3,
+            contrast: 55.0,
+        },
+    ];
+    let img = draw(w, h, &fish, 4.0, false, 5);
+    let p = Params::for_frame(512);
+    let mut out: Objects<16, 4096> = Objects::new();
+    let st = run(&img, w, h, &p, &mut out);
+    assert_eq!(out.items.len(), 2, "{st:?} {:?}", out.items);
+    // no two objects share a pixel
+    let mut seen = vec![false; w * h];
+    for o in &out.items {
+        for r in out.runs_of(o) {
+            for x in r.x0..r.x1 {
+                let i = r.y as usize * w + x as usize;
+                assert!(!seen[i]);
+                seen[i] = true;
+            }
+        }
+    }
+}
+
+#[test]
+fn too_small_workspace_is_an_error() {
+    let img = vec![0u8; 64 * 64];
+    let mut ws = vec![0u8; fixed_size(64, 64) / 2];
+    let mut out: Objects<4, 64> = Objects::new();
+    assert_eq!(
+        segment_frame(
+            ImageView::packed(&img, 64, 64).unwrap(),
+            &Params::default(),
+            &mut ws,
+            &mut out
+        ),
+        Err(SegmentError::WorkspaceTooSmall)
+    );
+    let bad = Params {
+        p_low: 2.0,
+        ..Params::default()
+    };
+    let mut ws = vec![0u8; workspace_size(64, 64, 64)];
+    assert!(matches!(
+        segment_frame(
+            ImageView::packed(&img, 64, 64).unwrap(),
+            &bad,
+            &mut ws,
+            &mut out
+        ),
+        Err(SegmentError::Params(_))
+    ));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #[test]
+    fn never_panics_and_stays_in_bounds(
+        w in 1usize..96, h in 1usize..96, seed in any::<u64>(), noise in 0.0f32..60.0,
+        nfish in 0usize..4, roi in 0usize..5000,
+        dt in any::<bool>(), bp in any::<bool>(), vr in any::<bool>(),
+        bins in prop::sample::select(vec![2u8, 8, 16, 32, 128]),
+        disk in prop::sample::select(vec![1u8, 3, 7, 15]),
+        mesh in prop::sample::select(vec![1u8, 3, 7]),
+        amin in 1u32..200,
+    ) {
+        let mut rng = Lcg(seed);
+        let fish: Vec<Fish> = (0..nfish).map(|_| Fish {
+            cx: rng.next() * w as f32, cy: rng.next() * h as f32,
+            a: 3.0 + rng.next() * 30.0, b: 2.0 + rng.next() * 8.0,
+            angle: rng.next() * 6.3, contrast: rng.next() * 150.0 - 40.0,
+        }).collect();
+        let img = draw(w, h, &fish, noise, seed % 2 == 0, seed);
+        let p = Params {
+            double_threshold: dt, backprojection: bp, variance_rejection: vr,
+            hist_bins: bins, disk_size: disk, mesh_line_len: mesh, area_min: amin,
+            var_min: 0.0, ..Params::default()
+        };
+        let mut ws = vec![0u8; workspace_size(w, h, roi)];
+        let mut out: Objects<8, 256> = Objects::new();
+        let st = segment_frame(ImageView::packed(&img, w, h).unwrap(), &p, &mut ws, &mut out).unwrap();
+        prop_assert_eq!(st.objects as usize, out.items.len());
+        let frame = Roi::full(w as u32, h as u32);
+        for o in &out.items {
+            prop_assert!(frame.intersect(&o.bbox) == o.bbox);
+            prop_assert!(o.area >= p.area_min && o.area <= p.area_max);
+            let runs = out.runs_of(o);
+            prop_assert_eq!(runs.iter().map(|r| r.len()).sum::<u32>(), o.area);
+            for r in runs {
+                prop_assert!(o.bbox.contains(r.x0 as u32, r.y as u32));
+                prop_assert!(r.x1 as u32 <= o.bbox.right());
+            }
+            prop_assert!(o.obb.half_w >= o.obb.half_h - 1e-3);
+            prop_assert!(o.mean >= 0.0 && o.mean <= 255.0);
+        }
+    }
+}
+
+#[test]
+fn full_size_frame_with_recommended_capacities() {
+    let (w, h) = (2048usize, 2048usize);
+    let fish = school(w);
+    let img = draw(w, h, &fish, 6.0, true, 21);
+    let p = Params::default();
+    let size = workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS);
+    let mut ws = vec![0u8; size];
+    let mut out: Box<Objects<64, 16384>> = Box::default();
+    let t0 = std::time::Instant::now();
+    let st = segment_frame(
+        ImageView::packed(&img, w, h).unwrap(),
+        &p,
+        &mut ws,
+        &mut out,
+    )
+    .unwrap();
+    let dt = t0.elapsed();
+    std::eprintln!(
+        "2048x2048: workspace {} bytes ({:.2} MiB; frame part {}), Objects<64,16384> {} bytes, Object {} bytes, {:?}, {:?}",
+        size,
+        size as f64 / (1 << 20) as f64,
+        fixed_size(w, h),
+        core::mem::size_of::<Objects<64, 16384>>(),
+        core::mem::size_of::<Object>(),
+        dt,
+        st
+    );
+    assert_eq!(out.items.len(), fish.len(), "{st:?}");
+    assert_eq!(st.regions_shrunk + st.label_overflow + st.dropped, 0);
+    for f in &fish {
+        let o = nearest(&out.items, f).unwrap();
+        let err = (2.0 * o.obb.half_w - 2.0 * f.a).abs() / (2.0 * f.a);
+        assert!(err < 0.08, "{f:?}: {o:?}");
+    }
+    let runs_used = out.runs.len();
+    std::eprintln!("runs used {runs_used} for {} objects", out.items.len());
+}
+
+#[test]
+fn padded_rows_give_the_same_objects() {
+    let (w, h) = (300usize, 200usize);
+    let fish = [Fish {
+        cx: 150.0,
+        cy: 100.0,
+        a: 50.0,
+        b: 14.0,
+        angle: 0.4,
+        contrast: 60.0,
+    }];
+    let img = draw(w, h, &fish, 5.0, true, 17);
+    let stride = w + 13;
+    let mut padded = vec![255u8; stride * h];
+    for y in 0..h {
+        padded[y * stride..y * stride + w].copy_from_slice(&img[y * w..(y + 1) * w]);
+    }
+    let p = Params::for_frame(512);
+    let mut ws = vec![0u8; workspace_size(w, h, w * h)];
+    let mut a: Objects<8, 1024> = Objects::new();
+    let mut b: Objects<8, 1024> = Objects::new();
+    segment_frame(ImageView::packed(&img, w, h).unwrap(), &p, &mut ws, &mut a).unwrap();
+    segment_frame(
+        ImageView::new(&padded, w, h, stride).unwrap(),
+        &p,
+        &mut ws,
+        &mut b,
+    )
+    .unwrap();
+    assert_eq!(a.items.len(), 1);
+    assert_eq!(a.items, b.items);
+    assert_eq!(a.runs, b.runs);
+}
+
+#[test]
+fn full_size_stage_times() {
+    // information only (no timed assertion): where a 2048² frame's time goes
+    let (w, h) = (2048usize, 2048usize);
+    let img = draw(w, h, &school(w), 6.0, true, 21);
+    let v = ImageView::packed(&img, w, h).unwrap();
+    let (mut tmp, mut out) = (vec![0u8; w * h], vec![0u8; w * h]);
+    let disk = crate::morph::Disk::opencv_ellipse(7);
+    let mut scratch = vec![0u8; crate::morph::disk_scratch_len(w, 3)];
+    let t0 = std::time::Instant::now();
+    crate::morph::remove_mesh(v, 7, &mut tmp, &mut out).unwrap();
+    let t1 = std::time::Instant::now();
+    crate::morph::gradient_disk(
+        ImageView::packed(&out, w, h).unwrap(),
+        &disk,
+        &mut tmp,
+        &mut scratch,
+    )
+    .unwrap();
+    let t2 = std::time::Instant::now();
+    let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
+    let mut objs: Box<Objects<64, 16384>> = Box::default();
+    segment_frame(v, &Params::default(), &mut ws, &mut objs).unwrap();
+    let t3 = std::time::Instant::now();
+    // again, with the workspace pages already touched (the steady state)
+    segment_frame(v, &Params::default(), &mut ws, &mut objs).unwrap();
+    let t4 = std::time::Instant::now();
+    std::eprintln!(
+        "2048² stage times (first touch): mesh removal {:?}, gradient {:?}, segment_frame {:?}; segment_frame again {:?}",
+        t1 - t0,
+        t2 - t1,
+        t3 - t2,
+        t4 - t3
+    );
+}

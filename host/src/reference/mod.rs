@@ -1,0 +1,7 @@
+//! The float reference: the core's stages re-implemented independently in
+//! plain `f64`, allocating, written for clarity, with `imageproc` for the
+//! primitives. It is the yardstick `fishtrack compare` measures the core
+//! against (DESIGN.md, "Float reference").
+
+pub mod compare;
+pub mod segment;

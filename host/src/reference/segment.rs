@@ -1,0 +1,440 @@
+//! Reference automatic fish segmentation (paper Section III, V.A) in `f64`.
+//!
+//! Same stages and conventions as `fishtrack_core::segment` (see its module
+//! docs), built independently:
+//! - morphology: `imageproc::morphology::grayscale_{erode,dilate}` with
+//!   masks built from OpenCV's `MORPH_ELLIPSE` formula evaluated in `f64`
+//!   and from `np.eye`-style diagonal lines; pixels outside the image are
+//!   ignored (imageproc's and OpenCV's convention);
+//! - Otsu: `imageproc::contrast::otsu_level` (foreground `p > t`);
+//! - eq. (1) thresholds compared as real numbers: `p > τ_x`;
+//! - median: `imageproc::filter::median_filter` (replicated border);
+//! - components: `imageproc::region_labelling::connected_components`,
+//!   8-connectivity; moments, PCA and variances in `f64`;
+//! - the elliptic region tested pixel by pixel in `f64`.
+//!
+//! Not modelled: the core's capacity limits (regions, ROI pixels,
+//! components per region, objects, runs). Compare only frames where the
+//! core reports no drops, shrinks or overflows.
+
+use fishtrack_core::Params;
+use image::{GrayImage, Luma};
+use imageproc::contrast::otsu_level;
+use imageproc::filter::median_filter;
+use imageproc::morphology::{grayscale_dilate, grayscale_erode, Mask};
+use imageproc::region_labelling::{connected_components, Connectivity};
+use std::collections::{HashMap, HashSet};
+
+/// An elliptic local region of the reference, with its thresholds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefRegion {
+    /// Centre x.
+    pub cx: f64,
+    /// Centre y.
+    pub cy: f64,
+    /// Enlarged semi-axis along the first principal axis.
+    pub a: f64,
+    /// Enlarged semi-axis along the second principal axis.
+    pub b: f64,
+    /// First principal axis angle, radians (y down).
+    pub angle: f64,
+    /// Otsu's τ on the ellipse (None when the region was skipped first).
+    pub tau: Option<u8>,
+    /// τ_low of eq. (1), real.
+    pub t_low: f64,
+    /// τ_high of eq. (1), real.
+    pub t_high: f64,
+}
+
+/// A segmented object of the reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefObject {
+    /// Mask pixels `(x, y)`, frame coordinates.
+    pub pixels: HashSet<(u32, u32)>,
+    /// Index of the region that produced it.
+    pub region: usize,
+    /// Upright box `(x0, y0, x1, y1)`, inclusive.
+    pub bbox: (u32, u32, u32, u32),
+    /// Mean grey level.
+    pub mean: f64,
+    /// Unbiased variance, eq. (5).
+    pub variance: f64,
+    /// Oriented box: centre x, centre y, half width, half height, angle.
+    pub obb: (f64, f64, f64, f64, f64),
+}
+
+/// Everything the reference computed for one frame.
+#[derive(Debug, Clone, Default)]
+pub struct RefResult {
+    /// Threshold on the morphological gradient.
+    pub gradient_threshold: u8,
+    /// Local regions, in processing order.
+    pub regions: Vec<RefRegion>,
+    /// Objects after duplicate removal.
+    pub objects: Vec<RefObject>,
+}
+
+/// OpenCV's `MORPH_ELLIPSE` of `size × size`, from its formula in f64:
+/// row `dy` spans `±round(c·√((r² − dy²)/r²))`, `c = r = size/2`.
+pub fn opencv_ellipse_mask(size: u8) -> Mask {
+    let s = size.max(1) as u32;
+    let r = (s / 2) as f64;
+    let mut img = GrayImage::new(s, s);
+    for i in 0..s {
+        let dy = i as f64 - r;
+        let dx = if r > 0.0 {
+            (r * ((r * r - dy * dy) / (r * r)).max(0.0).sqrt()).round()
+        } else {
+            0.0
+        };
+        for j in 0..s {
+            if (j as f64 - r).abs() <= dx {
+                img.put_pixel(j, i, Luma([255]));
+            }
+        }
+    }
+    Mask::from_image(&img, (s / 2) as u8, (s / 2) as u8)
+}
+
+/// A diagonal line of `len` pixels: main (`np.eye`) or anti (mirrored).
+pub fn line_mask(len: u8, anti: bool) -> Mask {
+    let l = len.max(1) as u32;
+    let mut img = GrayImage::new(l, l);
+    for i in 0..l {
+        let x = if anti { l - 1 - i } else { i };
+        img.put_pixel(x, i, Luma([255]));
+    }
+    Mask::from_image(&img, (l / 2) as u8, (l / 2) as u8)
+}
+
+fn open(img: &GrayImage, m: &Mask) -> GrayImage {
+    grayscale_dilate(&grayscale_erode(img, m), m)
+}
+
+fn close(img: &GrayImage, m: &Mask) -> GrayImage {
+    grayscale_erode(&grayscale_dilate(img, m), m)
+}
+
+/// Section V.A mesh removal: opening by the main diagonal, then by the anti-diagonal.
+pub fn remove_mesh(img: &GrayImage, len: u8) -> GrayImage {
+    if len < 3 {
+        return img.clone();
+    }
+    open(&open(img, &line_mask(len, false)), &line_mask(len, true))
+}
+
+/// Morphological gradient `dilate − erode` with the disk.
+pub fn gradient(img: &GrayImage, disk: &Mask) -> GrayImage {
+    let d = grayscale_dilate(img, disk);
+    let e = grayscale_erode(img, disk);
+    let mut g = GrayImage::new(img.width(), img.height());
+    for (o, (a, b)) in g.pixels_mut().zip(d.pixels().zip(e.pixels())) {
+        o.0[0] = a.0[0] - b.0[0];
+    }
+    g
+}
+
+/// Lower median of values (the ⌈n/2⌉-th smallest).
+fn lower_median(v: &mut [u32]) -> u32 {
+    if v.is_empty() {
+        return 0;
+    }
+    v.sort_unstable();
+    v[v.len().div_ceil(2) - 1]
+}
+
+/// `med + 4·max(MAD, 1)` of the gradient values.
+pub fn gradient_threshold(g: &GrayImage) -> u8 {
+    let mut v: Vec<u32> = g.pixels().map(|p| p.0[0] as u32).collect();
+    let med = lower_median(&mut v);
+    let mut dev: Vec<u32> = v.iter().map(|&x| x.abs_diff(med)).collect();
+    let mad = lower_median(&mut dev).max(1);
+    (med + 4 * mad).min(255) as u8
+}
+
+/// PCA of a pixel set: centroid, angle, λ₁, λ₂ (population covariance).
+fn pca(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
+    let n = px.len() as f64;
+    let mx = px.iter().map(|p| p.0 as f64).sum::<f64>() / n;
+    let my = px.iter().map(|p| p.1 as f64).sum::<f64>() / n;
+    let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+    for &(x, y) in px {
+        let (dx, dy) = (x as f64 - mx, y as f64 - my);
+        a += dx * dx;
+        b += dy * dy;
+        c += dx * dy;
+    }
+    let (a, b, c) = (a / n, b / n, c / n);
+    let d = (0.25 * (a - b) * (a - b) + c * c).sqrt();
+    let l1 = 0.5 * (a + b) + d;
+    let l2 = (0.5 * (a + b) - d).max(0.0);
+    let mut angle = 0.5 * (2.0 * c).atan2(a - b);
+    if angle <= -std::f64::consts::FRAC_PI_2 {
+        angle += std::f64::consts::PI;
+    }
+    (mx, my, angle, l1, l2)
+}
+
+/// Components of the nonzero pixels of `mask`: pixel lists in raster order
+/// of first pixel.
+fn components(mask: &GrayImage) -> Vec<Vec<(u32, u32)>> {
+    let lab = connected_components(mask, Connectivity::Eight, Luma([0u8]));
+    let mut by: HashMap<u32, usize> = HashMap::new();
+    let mut out: Vec<Vec<(u32, u32)>> = Vec::new();
+    for (x, y, p) in lab.enumerate_pixels() {
+        let l = p.0[0];
+        if l == 0 {
+            continue;
+        }
+        let k = *by.entry(l).or_insert_with(|| {
+            out.push(Vec::new());
+            out.len() - 1
+        });
+        out[k].push((x, y));
+    }
+    out
+}
+
+fn mean_var(img: &GrayImage, px: &[(u32, u32)]) -> (f64, f64) {
+    let n = px.len() as f64;
+    let m = px
+        .iter()
+        .map(|&(x, y)| img.get_pixel(x, y).0[0] as f64)
+        .sum::<f64>()
+        / n;
+    let v = if px.len() > 1 {
+        px.iter()
+            .map(|&(x, y)| (img.get_pixel(x, y).0[0] as f64 - m).powi(2))
+            .sum::<f64>()
+            / (n - 1.0)
+    } else {
+        0.0
+    };
+    (m, v)
+}
+
+/// Oriented box by projecting the corners of every pixel on the PCA axes.
+fn oriented_box(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
+    let (mx, my, angle, _, _) = pca(px);
+    let (c, s) = (angle.cos(), angle.sin());
+    let (mut umin, mut umax, mut vmin, mut vmax) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y) in px {
+        for (ox, oy) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+            let (dx, dy) = (x as f64 + ox - mx, y as f64 + oy - my);
+            let u = dx * c + dy * s;
+            let v = -dx * s + dy * c;
+            umin = umin.min(u);
+            umax = umax.max(u);
+            vmin = vmin.min(v);
+            vmax = vmax.max(v);
+        }
+    }
+    let (um, vm) = (0.5 * (umin + umax), 0.5 * (vmin + vmax));
+    (
+        mx + um * c - vm * s,
+        my + um * s + vm * c,
+        0.5 * (umax - umin),
+        0.5 * (vmax - vmin),
+        angle,
+    )
+}
+
+/// Segments one frame.
+pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
+    let (w, h) = img.dimensions();
+    let disk = opencv_ellipse_mask(p.disk_size);
+    let filtered = remove_mesh(img, p.mesh_line_len);
+    let g = gradient(&filtered, &disk);
+    let t = gradient_threshold(&g);
+    let mut fg = GrayImage::new(w, h);
+    for (o, q) in fg.pixels_mut().zip(g.pixels()) {
+        o.0[0] = if q.0[0] > t { 255 } else { 0 };
+    }
+    let mut res = RefResult {
+        gradient_threshold: t,
+        ..RefResult::default()
+    };
+    let min_coarse = (p.area_min / 4).max(1) as usize;
+    let (amin, amax) = (p.area_min as usize, p.area_max as usize);
+    for comp in components(&fg) {
+        if comp.len() < min_coarse {
+            continue;
+        }
+        let (cx, cy, angle, l1, l2) = pca(&comp);
+        let s = p.ellipse_scale as f64;
+        let a = (2.0 * l1.sqrt()).max(0.5) * s;
+        let b = (2.0 * l2.sqrt()).max(0.5) * s;
+        let ri = res.regions.len();
+        res.regions.push(RefRegion {
+            cx,
+            cy,
+            a,
+            b,
+            angle,
+            tau: None,
+            t_low: 0.0,
+            t_high: 0.0,
+        });
+        // pixels of the ellipse
+        let (c, sn) = (angle.cos(), angle.sin());
+        let inside = |x: u32, y: u32| {
+            let (dx, dy) = (x as f64 - cx, y as f64 - cy);
+            let u = dx * c + dy * sn;
+            let v = -dx * sn + dy * c;
+            u * u / (a * a) + v * v / (b * b) <= 1.0
+        };
+        let ex = (a * a * c * c + b * b * sn * sn).sqrt();
+        let ey = (a * a * sn * sn + b * b * c * c).sqrt();
+        let x0 = (cx - ex).ceil().clamp(0.0, w as f64) as u32;
+        let x1 = ((cx + ex).floor() + 1.0).clamp(0.0, w as f64) as u32;
+        let y0 = (cy - ey).ceil().clamp(0.0, h as f64) as u32;
+        let y1 = ((cy + ey).floor() + 1.0).clamp(0.0, h as f64) as u32;
+        if x1 <= x0 || y1 <= y0 {
+            continue;
+        }
+        let (rw, rh) = (x1 - x0, y1 - y0);
+        let ins: Vec<bool> = (0..rw * rh)
+            .map(|i| inside(x0 + i % rw, y0 + i / rw))
+            .collect();
+        let at = |i: u32| filtered.get_pixel(x0 + i % rw, y0 + i / rw).0[0];
+        let vals: Vec<u8> = (0..rw * rh).filter(|&i| ins[i as usize]).map(at).collect();
+        if vals.is_empty() || vals.len() < amin {
+            continue;
+        }
+        // eq. (1)
+        let tau = otsu_level(
+            &GrayImage::from_raw(vals.len() as u32, 1, vals.clone()).unwrap_or_default(),
+        );
+        let low: Vec<f64> = vals
+            .iter()
+            .filter(|&&v| v <= tau)
+            .map(|&v| v as f64)
+            .collect();
+        let mu_l = if low.is_empty() {
+            tau as f64
+        } else {
+            low.iter().sum::<f64>() / low.len() as f64
+        };
+        let (t_low, t_high) = if p.double_threshold {
+            (
+                tau as f64 - p.p_low as f64 * (tau as f64 - mu_l),
+                tau as f64 - p.p_high as f64 * (tau as f64 - mu_l),
+            )
+        } else {
+            (tau as f64, tau as f64)
+        };
+        {
+            let r = &mut res.regions[ri];
+            r.tau = Some(tau);
+            r.t_low = t_low;
+            r.t_high = t_high;
+        }
+        let mask_of = |t: f64| {
+            GrayImage::from_fn(rw, rh, |x, y| {
+                let i = y * rw + x;
+                Luma([if ins[i as usize] && at(i) as f64 > t {
+                    255
+                } else {
+                    0
+                }])
+            })
+        };
+        let restrict = |m: GrayImage| {
+            GrayImage::from_fn(rw, rh, |x, y| {
+                let i = (y * rw + x) as usize;
+                Luma([if ins[i] { m.get_pixel(x, y).0[0] } else { 0 }])
+            })
+        };
+        let m_low = restrict(median_filter(&mask_of(t_low), 1, 1));
+        let m_high = restrict(median_filter(&mask_of(t_high), 1, 1));
+        // eq. (2)–(3)
+        let bmask = if p.double_threshold && p.backprojection {
+            let bins = p.hist_bins as usize;
+            let (mut hl, mut hh) = (vec![0f64; bins], vec![0f64; bins]);
+            for i in 0..rw * rh {
+                let (x, y) = (i % rw, i / rw);
+                let bin = at(i) as usize * bins / 256;
+                if m_low.get_pixel(x, y).0[0] > 0 {
+                    hl[bin] += 1.0;
+                }
+                if m_high.get_pixel(x, y).0[0] > 0 {
+                    hh[bin] += 1.0;
+                }
+            }
+            let ratio: Vec<f64> = hl
+                .iter()
+                .zip(&hh)
+                .map(|(&l, &hv)| if l > 0.0 { (hv / l).min(1.0) } else { 0.0 })
+                .collect();
+            GrayImage::from_fn(rw, rh, |x, y| {
+                let i = y * rw + x;
+                let bp = ratio[at(i) as usize * bins / 256];
+                Luma([if ins[i as usize] && bp > p.theta_bp as f64 {
+                    255
+                } else {
+                    0
+                }])
+            })
+        } else {
+            m_high
+        };
+        // eq. (4)–(6)
+        let roi_img = GrayImage::from_fn(rw, rh, |x, y| *filtered.get_pixel(x0 + x, y0 + y));
+        let mut kept = GrayImage::new(rw, rh);
+        for comp in components(&bmask) {
+            if comp.len() < amin || comp.len() > amax {
+                continue;
+            }
+            let (_, var) = mean_var(&roi_img, &comp);
+            if p.variance_rejection && var < p.var_min as f64 {
+                continue;
+            }
+            for &(x, y) in &comp {
+                kept.put_pixel(x, y, Luma([255]));
+            }
+        }
+        // Section III.D
+        let post = open(&close(&kept, &disk), &disk);
+        for comp in components(&post) {
+            if comp.len() < amin || comp.len() > amax {
+                continue;
+            }
+            let (mean, variance) = mean_var(&roi_img, &comp);
+            let frame_px: Vec<(u32, u32)> = comp.iter().map(|&(x, y)| (x + x0, y + y0)).collect();
+            let bbox = (
+                frame_px.iter().map(|p| p.0).min().unwrap_or(0),
+                frame_px.iter().map(|p| p.1).min().unwrap_or(0),
+                frame_px.iter().map(|p| p.0).max().unwrap_or(0),
+                frame_px.iter().map(|p| p.1).max().unwrap_or(0),
+            );
+            let obj = RefObject {
+                obb: oriented_box(&frame_px),
+                pixels: frame_px.into_iter().collect(),
+                region: ri,
+                bbox,
+                mean,
+                variance,
+            };
+            add_dedup(&mut res.objects, obj);
+        }
+    }
+    res
+}
+
+/// One fish, one object: an object sharing more than half of the smaller
+/// mask with another is the same fish; the larger is kept (first on a tie).
+fn add_dedup(objs: &mut Vec<RefObject>, o: RefObject) {
+    let mut i = 0;
+    while i < objs.len() {
+        let ov = objs[i].pixels.intersection(&o.pixels).count();
+        if 2 * ov > objs[i].pixels.len().min(o.pixels.len()) {
+            if objs[i].pixels.len() >= o.pixels.len() {
+                return;
+            }
+            objs.swap_remove(i);
+            continue;
+        }
+        i += 1;
+    }
+    objs.push(o);
+}
