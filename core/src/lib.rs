@@ -23,6 +23,7 @@ pub mod error;
 pub mod image;
 pub mod object;
 pub mod params;
+pub mod track;
 
 pub use error::{ImageError, ParamError};
 pub use image::{ImageView, ImageViewMut, Roi};
