@@ -148,6 +148,7 @@ struct Node {
 
 struct Target {
     id: u32,
+    hits: u32,
     stages: Vec<(u32, Vec<Node>)>,
     front: Vec<State>,
     closed: bool,
@@ -514,6 +515,27 @@ pub fn run(
                 }
             }
         }
+        // Duplicate trellises (same observations in the last two frames of
+        // their best paths): drop the one with less evidence (younger on ties).
+        if p.tracker == Assoc::Viterbi {
+            for i in 0..targets.len() {
+                for j in (i + 1)..targets.len() {
+                    if targets[i].closed || targets[j].closed {
+                        continue;
+                    }
+                    let (ki, kj) = (last_two(&targets[i]), last_two(&targets[j]));
+                    if ki.is_none() || ki != kj {
+                        continue;
+                    }
+                    let d = if evidence(&targets[j]) > evidence(&targets[i]) {
+                        i
+                    } else {
+                        j
+                    };
+                    targets[d].closed = true; // nothing more committed
+                }
+            }
+        }
         targets.retain(|t| !t.closed);
 
         // Births.
@@ -536,6 +558,7 @@ pub fn run(
             }
             targets.push(Target {
                 id: next_id,
+                hits: 0,
                 stages: vec![(
                     frame,
                     vec![Node {
@@ -580,10 +603,34 @@ fn best_path(t: &Target) -> Vec<usize> {
     path
 }
 
+fn last_two(t: &Target) -> Option<(usize, usize)> {
+    let n = t.stages.len();
+    if n < 2 {
+        return None;
+    }
+    let path = best_path(t);
+    match (
+        t.stages[n - 1].1[path[n - 1]].obs,
+        t.stages[n - 2].1[path[n - 2]].obs,
+    ) {
+        (Some(a), Some(b)) => Some((a, b)),
+        _ => None,
+    }
+}
+
+fn evidence(t: &Target) -> u32 {
+    let path = best_path(t);
+    t.hits
+        + (0..t.stages.len())
+            .filter(|&s| t.stages[s].1[path[s]].obs.is_some())
+            .count() as u32
+}
+
 fn commit_oldest(t: &mut Target, out: &mut Vec<Assignment>) {
     let path = best_path(t);
     let chosen = path[0];
     let (frame, nodes) = t.stages.remove(0);
+    t.hits += nodes[chosen].obs.is_some() as u32;
     out.push(Assignment {
         frame,
         track: t.id,

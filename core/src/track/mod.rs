@@ -34,6 +34,14 @@
 //!    to the last real observation are committed, and a
 //!    [`TrackEvent::Closed`] carries the whole path.
 //!
+//! **Duplicates (Viterbi only; our addition):** independent trellises that
+//! reach the same observation carry identical states from then on, so two
+//! targets whose best paths take the same real observations in the last two
+//! frames are one fish counted twice; the one with fewer observations on
+//! its path (on ties the younger) is dropped without committing its
+//! uncommitted stages ([`CloseReason::Duplicate`]). A one-frame crossing
+//! (shared node, Section VI.C) is unaffected.
+//!
 //! Then every valid observation not in S is a **new target** if it is
 //! plausibly a fish entering (Section IV.C.2, "new targets tend to appear
 //! close to the video frame border … false alarms … areas are usually
@@ -221,6 +229,10 @@ pub enum CloseReason {
     Lost,
     /// [`Tracker::finish`] was called.
     End,
+    /// Its best path had joined another target's (the same observations in
+    /// the last two frames): a duplicate, dropped without committing its
+    /// uncommitted stages.
+    Duplicate,
 }
 
 /// What the tracker reports.
@@ -505,6 +517,9 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
             Association::Viterbi => self.step_viterbi(frame, &ctx, params, sink),
             Association::Mc | Association::Nn => self.step_greedy(frame, &ctx, params, sink),
         }
+        if params.tracker == Association::Viterbi {
+            self.drop_duplicates(sink);
+        }
         self.targets.retain(|t| t.closing.is_none());
         self.births(frame, params);
         Ok(())
@@ -709,6 +724,32 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         }
     }
 
+    /// Two trellises whose best paths take the same observations in the last
+    /// two frames follow one fish: the one with fewer observations on its
+    /// path (committed + uncommitted best path; on ties the younger) is
+    /// dropped. O(T²) per frame.
+    fn drop_duplicates<S: EventSink + ?Sized>(&mut self, sink: &mut S) {
+        let n = self.targets.len();
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let (Some(a), Some(b)) = (self.targets.get(i), self.targets.get(j)) else {
+                    continue;
+                };
+                if a.closing.is_some() || b.closing.is_some() {
+                    continue;
+                }
+                let ka = last_two(&a.trellis);
+                if ka.is_none() || ka != last_two(&b.trellis) {
+                    continue;
+                }
+                let drop = if evidence(b) > evidence(a) { i } else { j };
+                if let Some(t) = self.targets.get_mut(drop) {
+                    close(t, CloseReason::Duplicate, &mut self.stats, sink);
+                }
+            }
+        }
+    }
+
     /// New targets from unassociated observations (see the module docs).
     fn births(&mut self, frame: u32, params: &Params) {
         let (w, h, m) = (self.cfg.width, self.cfg.height, params.margin);
@@ -841,6 +882,38 @@ fn advance<
     }
 }
 
+/// Observations of the best path's last two stages, if both are real.
+fn last_two<const D: usize, const K: usize>(t: &Trellis<D, K>) -> Option<(u16, u16)> {
+    let n = t.len();
+    if n < 2 {
+        return None;
+    }
+    let last = t.stage(n - 1)?.nodes.get(t.best_front()?)?;
+    let prev = t.stage(n - 2)?.nodes.get(last.pred as usize)?;
+    (last.obs != PREDICTED && prev.obs != PREDICTED).then_some((last.obs, prev.obs))
+}
+
+/// Observations on a target's path: committed hits + real nodes of the
+/// uncommitted best path.
+fn evidence<const D: usize, const K: usize, const H: usize>(t: &Target<D, K, H>) -> u32 {
+    let mut path = [0u8; D];
+    let mut n = t.hits;
+    if t.trellis
+        .best_front()
+        .is_some_and(|b| t.trellis.backtrack(b, &mut path))
+    {
+        for s in 0..t.trellis.len() {
+            let real = t
+                .trellis
+                .stage(s)
+                .and_then(|st| st.nodes.get(path.get(s).copied().unwrap_or(0) as usize))
+                .is_some_and(|nd| nd.obs != PREDICTED);
+            n += real as u32;
+        }
+    }
+    n
+}
+
 /// Appends a committed step to the target's path and reports it.
 fn record<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>(
     t: &mut Target<D, K, H>,
@@ -895,10 +968,10 @@ fn close<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>(
     }
     t.closing = Some(reason);
     let mut path = [0u8; D];
-    let ok = t
-        .trellis
-        .best_front()
-        .is_some_and(|b| t.trellis.backtrack(b, &mut path));
+    let ok = reason != CloseReason::Duplicate
+        && t.trellis
+            .best_front()
+            .is_some_and(|b| t.trellis.backtrack(b, &mut path));
     if ok {
         let n = t.trellis.len();
         let mut last_real = None;
