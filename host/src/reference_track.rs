@@ -467,7 +467,6 @@ pub fn run(
                     .front
                     .iter()
                     .enumerate()
-                    .filter(|(_, s)| s.lost < cfg.max_lost as u32)
                     .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost).then(a.0.cmp(&b.0)));
                 if let Some((i, st)) = lp {
                     new.push(mk_pred(st, i));
@@ -513,6 +512,9 @@ pub fn run(
                 if !(q[0] >= m && q[0] < w - m && q[1] >= m && q[1] < h - m) {
                     close(t, &mut out);
                 }
+            }
+            if new_best_lost && best.lost > cfg.max_lost as u32 {
+                close(t, &mut out);
             }
         }
         // Duplicate trellises (same observations in the last two frames of

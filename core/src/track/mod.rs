@@ -11,8 +11,7 @@
 //!    π_j = argmin_i C_i + c_ij and C_j = C_π + c_πj (eq. 11–12); the `K−1`
 //!    cheapest are kept (the rest counted in `nodes_dropped`), plus one
 //!    *predicted* node (the target is lost this frame: position = prediction,
-//!    velocity kept) from the cheapest front node with fewer than `max_lost`
-//!    consecutive lost frames, at cost C + `miss_cost`. Several trellises may
+//!    velocity kept) from the cheapest front node, at cost C + `miss_cost`. Several trellises may
 //!    take the same observation (shared nodes = occlusion, Section VI.C).
 //!    **MC / NN:** one node per stage, from a greedy one-to-one assignment
 //!    ([`greedy`]) on the matching cost (MC, accepted below `miss_cost`) or on
@@ -28,8 +27,10 @@
 //!    "a track is restricted to end only when its predicted position is
 //!    close to the frame border" — a fish still seen near the border keeps
 //!    its track;
-//!    it **dies** when the new stage is empty (no gated candidate and
-//!    `max_lost` consecutive lost frames reached). Either way its trellis is
+//!    it **dies** when its minimum-cost node is a predicted one with more
+//!    than `max_lost` consecutive lost frames (Viterbi; so a long-lost
+//!    target never grabs whatever is left as a last chance), or when it has
+//!    no candidate after `max_lost` lost frames (MC/NN). Either way its trellis is
 //!    backtracked from the minimum-cost front node, the uncommitted stages up
 //!    to the last real observation are committed, and a
 //!    [`TrackEvent::Closed`] carries the whole path.
@@ -225,7 +226,7 @@ pub struct PathStep {
 pub enum CloseReason {
     /// Its prediction reached the border margin (left the field of view).
     Exit,
-    /// No candidate and `max_lost` lost frames in a row.
+    /// Lost for more than `max_lost` frames in a row.
     Lost,
     /// [`Tracker::finish`] was called.
     End,
@@ -620,11 +621,11 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 let _ = nodes.push(node_of(&s, c.obs, c.pair, pi));
                 let _ = states.push(s);
             }
-            // The predicted node, from the cheapest front node not yet lost
-            // max_lost times in a row.
+            // The predicted node, from the cheapest front node (the target
+            // dies in `advance` if it wins after max_lost lost frames).
             let mut lp: Option<(usize, f32)> = None;
             for (i, s) in t.trellis.front.iter().enumerate() {
-                if s.lost < cfg.max_lost && lp.is_none_or(|(_, c)| s.cost < c) {
+                if lp.is_none_or(|(_, c)| s.cost < c) {
                     lp = Some((i, s.cost));
                 }
             }
@@ -877,7 +878,11 @@ fn advance<
             let (w, h) = (cfg.width as f32, cfg.height as f32);
             if !(p[0] >= m && p[0] < w - m && p[1] >= m && p[1] < h - m) {
                 close(t, CloseReason::Exit, stats, sink);
+                return;
             }
+        }
+        if s.lost > cfg.max_lost {
+            close(t, CloseReason::Lost, stats, sink);
         }
     }
 }
