@@ -382,7 +382,7 @@ fn run_core(h: &Haul, assoc: Assoc, cues: Cues) -> Claims {
 /// A fish is *correctly labelled* when one id k claims its observation in
 /// every frame where any track claims it (other claimants are allowed only if
 /// they are the labels of other fish merged into the same object), k never
-/// claims an observation that does not show this fish, and k is on it in at
+/// claims an observation showing another fish but not this one, and k is on it in at
 /// least half of its visible frames. The denominator counts fish detected in
 /// at least half of their visible frames (correctly detected).
 fn success(h: &Haul, claims: &Claims) -> (f64, usize, f64) {
@@ -437,7 +437,11 @@ fn success(h: &Haul, claims: &Claims) -> (f64, usize, f64) {
             continue;
         };
         let every_frame = per_fish[fi].values().all(|s| s.contains(&k));
-        let exclusive = id_owners[&k].iter().all(|own| own.contains(&fi));
+        // No other fish shares k (claims of debris are false positives, not
+        // another fish's label).
+        let exclusive = id_owners[&k]
+            .iter()
+            .all(|own| own.is_empty() || own.contains(&fi));
         // Other ids on this fish's frames must be shared-object claims by
         // tracks that belong to other fish merged with it.
         let others_ok = per_fish[fi].iter().all(|(&f, s)| {
@@ -518,6 +522,8 @@ fn table_v_viterbi_beats_mc_and_nn_at_5_and_2_5_fps() {
         );
         assert!(idn > idv, "NN must double-count more: {idn} vs {idv}");
     }
+    // Thinning to 2.5 fps costs Viterbi no more than it costs NN.
+    assert!(rows[0].0 - rows[1].0 <= rows[0].2 - rows[1].2);
 }
 
 #[test]
