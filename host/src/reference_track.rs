@@ -517,8 +517,10 @@ pub fn run(
                 close(t, &mut out);
             }
         }
-        // Duplicate trellises (same observations in the last two frames of
-        // their best paths): drop the one with less evidence (younger on ties).
+        // Duplicate trellises: same observations in the last two frames of
+        // their best paths, or the same newest observation when one of them
+        // is a newborn on its first transition. Drop the one with less
+        // evidence, then higher best cost, then the younger.
         if p.tracker == Assoc::Viterbi {
             for i in 0..targets.len() {
                 for j in (i + 1)..targets.len() {
@@ -526,10 +528,18 @@ pub fn run(
                         continue;
                     }
                     let (ki, kj) = (last_two(&targets[i]), last_two(&targets[j]));
-                    if ki.is_none() || ki != kj {
+                    let li = last_obs(&targets[i]);
+                    let newborn = |t: &Target| t.hits == 0 && t.stages.len() == 2;
+                    let same_newborn = li.is_some()
+                        && li == last_obs(&targets[j])
+                        && (newborn(&targets[i]) || newborn(&targets[j]));
+                    if !(ki.is_some() && ki == kj) && !same_newborn {
                         continue;
                     }
-                    let d = if evidence(&targets[j]) > evidence(&targets[i]) {
+                    let (ei, ej) = (evidence(&targets[i]), evidence(&targets[j]));
+                    let d = if ej > ei
+                        || (ej == ei && best_cost(&targets[j]) < best_cost(&targets[i]))
+                    {
                         i
                     } else {
                         j
@@ -603,6 +613,19 @@ fn best_path(t: &Target) -> Vec<usize> {
         cur = t.stages[s].1[cur].pred;
     }
     path
+}
+
+fn last_obs(t: &Target) -> Option<usize> {
+    let n = t.stages.len();
+    if n == 0 {
+        return None;
+    }
+    let path = best_path(t);
+    t.stages[n - 1].1[path[n - 1]].obs
+}
+
+fn best_cost(t: &Target) -> f64 {
+    t.front.iter().map(|s| s.cost).fold(f64::INFINITY, f64::min)
 }
 
 fn last_two(t: &Target) -> Option<(usize, usize)> {

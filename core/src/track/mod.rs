@@ -38,10 +38,13 @@
 //! **Duplicates (Viterbi only; our addition):** independent trellises that
 //! reach the same observation carry identical states from then on, so two
 //! targets whose best paths take the same real observations in the last two
-//! frames are one fish counted twice; the one with fewer observations on
-//! its path (on ties the younger) is dropped without committing its
-//! uncommitted stages ([`CloseReason::Duplicate`]). A one-frame crossing
-//! (shared node, Section VI.C) is unaffected.
+//! frames are one fish counted twice, and so are two targets whose best
+//! nodes take the same observation when one of them is a newborn making its
+//! first transition (a debris- or fragment-born target latching onto a
+//! fish). The one with fewer observations on its path (then the higher
+//! best cost C, then the younger) is dropped without committing its
+//! uncommitted stages ([`CloseReason::Duplicate`]). A one-frame crossing of
+//! two established targets (shared node, Section VI.C) is unaffected.
 //!
 //! Then every valid observation not in S is a **new target** if it is
 //! plausibly a fish entering (Section IV.C.2, "new targets tend to appear
@@ -725,10 +728,8 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         }
     }
 
-    /// Two trellises whose best paths take the same observations in the last
-    /// two frames follow one fish: the one with fewer observations on its
-    /// path (committed + uncommitted best path; on ties the younger) is
-    /// dropped. O(T²) per frame.
+    /// Drops duplicate trellises (see the module documentation). O(T²) per
+    /// frame.
     fn drop_duplicates<S: EventSink + ?Sized>(&mut self, sink: &mut S) {
         let n = self.targets.len();
         for i in 0..n {
@@ -740,10 +741,20 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                     continue;
                 }
                 let ka = last_two(&a.trellis);
-                if ka.is_none() || ka != last_two(&b.trellis) {
+                let same_two = ka.is_some() && ka == last_two(&b.trellis);
+                let la = last_obs(&a.trellis);
+                let newborn = |t: &Target<D, K, H>| t.hits == 0 && t.trellis.len() == 2;
+                let same_newborn =
+                    la.is_some() && la == last_obs(&b.trellis) && (newborn(a) || newborn(b));
+                if !same_two && !same_newborn {
                     continue;
                 }
-                let drop = if evidence(b) > evidence(a) { i } else { j };
+                let (ea, eb) = (evidence(a), evidence(b));
+                let drop = if eb > ea || (eb == ea && best_cost(b) < best_cost(a)) {
+                    i
+                } else {
+                    j
+                };
                 if let Some(t) = self.targets.get_mut(drop) {
                     close(t, CloseReason::Duplicate, &mut self.stats, sink);
                 }
@@ -885,6 +896,21 @@ fn advance<
             close(t, CloseReason::Lost, stats, sink);
         }
     }
+}
+
+/// Observation of the best front node, if real.
+fn last_obs<const D: usize, const K: usize>(t: &Trellis<D, K>) -> Option<u16> {
+    let n = t.len();
+    let last = t.stage(n.checked_sub(1)?)?.nodes.get(t.best_front()?)?;
+    (last.obs != PREDICTED).then_some(last.obs)
+}
+
+/// C of the best front node.
+fn best_cost<const D: usize, const K: usize, const H: usize>(t: &Target<D, K, H>) -> f32 {
+    t.trellis
+        .best_front()
+        .and_then(|b| t.trellis.front.get(b))
+        .map_or(f32::INFINITY, |s| s.cost)
 }
 
 /// Observations of the best path's last two stages, if both are real.
