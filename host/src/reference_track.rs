@@ -533,7 +533,8 @@ pub fn run(
                     let same_newborn = li.is_some()
                         && li == last_obs(&targets[j])
                         && (newborn(&targets[i]) || newborn(&targets[j]));
-                    if !(ki.is_some() && ki == kj) && !same_newborn {
+                    let same_two = ki.is_some() && ki == kj;
+                    if !same_two && !same_newborn {
                         continue;
                     }
                     let (ei, ej) = (evidence(&targets[i]), evidence(&targets[j]));
