@@ -35,6 +35,7 @@ pub mod length;
 pub mod refine;
 pub mod snake;
 pub mod stereo;
+pub mod track;
 
 pub use error::{ImageError, ParamError};
 pub use geometry::StereoGeometry;

@@ -14,6 +14,7 @@ pub mod params_file;
 pub mod timing;
 pub mod reference_stereo;
 pub mod reference;
+pub mod reference_track;
 pub mod truth;
 
 pub use error::InputError;

@@ -1,0 +1,69 @@
+//! Frame-to-frame greedy association for the baselines of Table V: the
+//! paper's "MC" (matching cost alone, eq. 9) and "NN" (nearest neighbour on
+//! the predicted position). The tracker builds a key matrix (MC: the stereo
+//! matching cost; NN: the squared distance to the prediction) with
+//! `f32::INFINITY` for gated-out pairs, and this module assigns one-to-one.
+
+/// Greedy one-to-one assignment: repeatedly takes the smallest finite key
+/// among free rows and free columns (ties: lowest row, then lowest column)
+/// and writes `out[row] = Some(col)`. Rows without a partner stay `None`.
+///
+/// Work is bounded by `min(rows, cols) · rows · cols` key reads.
+pub fn greedy_assign<const N: usize>(keys: &[[f32; N]], cols: usize, out: &mut [Option<u16>]) {
+    let rows = keys.len().min(out.len());
+    let cols = cols.min(N).min(u16::MAX as usize);
+    for o in out.iter_mut() {
+        *o = None;
+    }
+    let mut col_used = [false; N];
+    for _ in 0..rows.min(cols) {
+        let mut best: Option<(usize, usize, f32)> = None;
+        for (r, row) in keys.iter().enumerate().take(rows) {
+            if out.get(r).is_some_and(|o| o.is_some()) {
+                continue;
+            }
+            for (c, &k) in row.iter().enumerate().take(cols) {
+                if col_used.get(c).copied().unwrap_or(true) || !k.is_finite() {
+                    continue;
+                }
+                if best.is_none_or(|(_, _, bk)| k < bk) {
+                    best = Some((r, c, k));
+                }
+            }
+        }
+        let Some((r, c, _)) = best else {
+            break;
+        };
+        if let Some(o) = out.get_mut(r) {
+            *o = Some(c as u16);
+        }
+        if let Some(u) = col_used.get_mut(c) {
+            *u = true;
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    const I: f32 = f32::INFINITY;
+
+    #[test]
+    fn greedy_takes_smallest_first() {
+        let keys = [[1.0, 2.0, I], [0.5, 3.0, I], [I, I, I]];
+        let mut out = [None; 3];
+        greedy_assign(&keys, 3, &mut out);
+        // (1,0) at 0.5 first, then (0,1) at 2.0; row 2 has no finite key.
+        assert_eq!(out, [Some(1), Some(0), None]);
+    }
+
+    #[test]
+    fn ties_go_to_lowest_row_then_column() {
+        let keys = [[1.0, 1.0], [1.0, 1.0]];
+        let mut out = [None; 2];
+        greedy_assign(&keys, 2, &mut out);
+        assert_eq!(out, [Some(0), Some(1)]);
+    }
+}

@@ -1,0 +1,1044 @@
+//! Low-frame-rate multi-fish tracking: feature-based temporal matching
+//! (Section IV.B, eq. 7–9) and multi-target Viterbi data association
+//! (Section IV.C, eq. 10–14, Algorithm 1, Fig. 8), with the greedy MC and NN
+//! baselines of Table V and the cue ablation of Fig. 15.
+//!
+//! # Per frame ([`Tracker::step`], Algorithm 1)
+//! For every live target k (in birth order):
+//! 1. If its trellis holds `D` stages, commit the oldest (see [`viterbi`]).
+//! 2. Build the new stage. **Viterbi:** every observation j whose edge cost
+//!    from some front node i is below `gate_cost` becomes a node with
+//!    π_j = argmin_i C_i + c_ij and C_j = C_π + c_πj (eq. 11–12); the `K−1`
+//!    cheapest are kept (the rest counted in `nodes_dropped`), plus one
+//!    *predicted* node (the target is lost this frame: position = prediction,
+//!    velocity kept) from the cheapest front node, at cost C + `miss_cost`. Several trellises may
+//!    take the same observation (shared nodes = occlusion, Section VI.C).
+//!    **MC / NN:** one node per stage, from a greedy one-to-one assignment
+//!    ([`greedy`]) on the matching cost (MC, accepted below `miss_cost`) or on
+//!    the distance to the prediction (NN, accepted when
+//!    ‖x − x̂‖²/σ_v² < `nn_gate`); unassigned targets get the predicted node.
+//! 3. The minimum-cost node of the stage gives the target's position and
+//!    velocity: x_t = x_j*, v_t = α(x_j* − x_π) + (1−α)v_π (eq. 13–14; a
+//!    target's first transition sets v to the displacement, as it has no
+//!    velocity yet); its observation joins the selection set S.
+//! 4. The target **exits** when it is lost this frame (its minimum-cost node
+//!    is the predicted one) and that predicted position lies within `margin`
+//!    M of the frame border or outside it (only once its velocity is known):
+//!    "a track is restricted to end only when its predicted position is
+//!    close to the frame border" — a fish still seen near the border keeps
+//!    its track;
+//!    it **dies** when its minimum-cost node is a predicted one with more
+//!    than `max_lost` consecutive lost frames (Viterbi; so a long-lost
+//!    target never grabs whatever is left as a last chance), or when it has
+//!    no candidate after `max_lost` lost frames (MC/NN). Either way its trellis is
+//!    backtracked from the minimum-cost front node, the uncommitted stages up
+//!    to the last real observation are committed, and a
+//!    [`TrackEvent::Closed`] carries the whole path.
+//!
+//! **Duplicates (Viterbi only; our addition):** independent trellises that
+//! reach the same observation carry identical states from then on, so two
+//! targets whose best paths take the same real observations in the last two
+//! frames are one fish counted twice, and so are two targets whose best
+//! nodes take the same observation when one of them is a newborn making its
+//! first transition (a debris- or fragment-born target latching onto a
+//! fish). The one with fewer observations on its path (then the higher
+//! best cost C, then the younger) is dropped without committing its
+//! uncommitted stages ([`CloseReason::Duplicate`]). A one-frame crossing of
+//! two established targets (shared node, Section VI.C) is unaffected.
+//!
+//! Then every valid observation not in S is a **new target** if it is
+//! plausibly a fish entering (Section IV.C.2, "new targets tend to appear
+//! close to the video frame border … false alarms … areas are usually
+//! small"): its left box lies within M of a border, *or* its left area is at
+//! least `birth_area_factor` · θ_A^L. Other unassociated observations are
+//! rejected as false alarms. The birth and death rules are the same for all
+//! three association methods.
+//!
+//! # Events
+//! [`TrackEvent::Frame`] for every committed frame of a track (emitted up to
+//! `D` frames late: online on a device) and [`TrackEvent::Closed`] with the
+//! full path. A host collects everything by calling [`Tracker::finish`]
+//! after the last frame.
+//!
+//! # Memory
+//! `Tracker<T, D, K, H, N>`: T live targets, D stages of K nodes per trellis,
+//! H path steps per track, N observations per frame; all inline, no heap.
+//! [`DefaultTracker`] is 32 targets × 16 stages × 8 nodes, 32-step paths,
+//! 64 observations per frame. Overflow of any capacity is counted in
+//! [`TrackStats`], never fatal.
+
+pub mod cost;
+pub mod greedy;
+pub mod observation;
+pub mod sigma;
+pub mod viterbi;
+
+use core::fmt;
+
+pub use cost::{Cues, Sigmas};
+pub use observation::{CameraView, Observation};
+
+use crate::error::ParamError;
+use crate::image::Roi;
+use crate::params::{Params, Tracker as Association};
+use cost::{camera_cost, cdf, edge_features, EdgeFeatures, ViewFeat};
+use sigma::SigmaEstimator;
+use viterbi::{round_i16, Node, NodeState, Trellis, PREDICTED};
+
+/// The default tracker: 32 targets, trellis depth 16, 8 nodes per stage,
+/// 32-step paths, 64 observations per frame.
+pub type DefaultTracker = Tracker<32, 16, 8, 32, 64>;
+
+/// Tracking options that are not Table I parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TrackConfig {
+    /// Frame width, pixels (rectified).
+    pub width: u32,
+    /// Frame height, pixels.
+    pub height: u32,
+    /// Cues of the matching cost (Fig. 15 ablation). Default: all.
+    pub cues: Cues,
+    /// Cost of a lost frame (the predicted node's edge). Default 24.
+    pub miss_cost: f32,
+    /// Edges costing this much or more are not considered. Default 48.
+    pub gate_cost: f32,
+    /// NN gate on ‖x − x̂‖²/σ_v². Default 16 (4 σ).
+    pub nn_gate: f32,
+    /// Maximum consecutive lost frames on a path; at most D − 2. Default 3.
+    pub max_lost: u8,
+    /// An unassociated observation away from the border becomes a target when
+    /// its left area ≥ this · θ_A^L (`Params::area_min`). Default 4.
+    pub birth_area_factor: f32,
+    /// Reference depth z_ref of the area normalisation, mm. Default 2000.
+    pub z_ref_mm: f32,
+    /// Default σ² until enough samples (see [`sigma`]).
+    pub sigma_defaults: Sigmas,
+    /// Samples a cue needs before its σ² is estimated. Default 32.
+    pub min_sigma_samples: u16,
+}
+
+impl TrackConfig {
+    /// Defaults for a `width × height` rectified frame.
+    pub fn for_frame(width: u32, height: u32) -> TrackConfig {
+        TrackConfig {
+            width,
+            height,
+            cues: Cues::ALL,
+            miss_cost: 24.0,
+            gate_cost: 48.0,
+            nn_gate: 16.0,
+            max_lost: 3,
+            birth_area_factor: 4.0,
+            z_ref_mm: 2000.0,
+            sigma_defaults: Sigmas::for_frame(width),
+            min_sigma_samples: 32,
+        }
+    }
+
+    /// Checks the configuration for a trellis of depth `depth`.
+    pub fn validate(&self, depth: usize) -> Result<(), TrackError> {
+        let pos = |v: f32| v.is_finite() && v > 0.0;
+        if self.width == 0 || self.height == 0 || self.width > 32_000 || self.height > 32_000 {
+            return Err(TrackError::Config("width/height: 1 to 32000"));
+        }
+        if !pos(self.miss_cost) || !pos(self.gate_cost) || !pos(self.nn_gate) {
+            return Err(TrackError::Config(
+                "miss_cost, gate_cost, nn_gate: finite, > 0",
+            ));
+        }
+        if self.max_lost as usize + 2 > depth {
+            return Err(TrackError::Config("max_lost must be ≤ trellis depth − 2"));
+        }
+        if !self.birth_area_factor.is_finite()
+            || self.birth_area_factor < 0.0
+            || !pos(self.z_ref_mm)
+        {
+            return Err(TrackError::Config("birth_area_factor ≥ 0, z_ref_mm > 0"));
+        }
+        let s = &self.sigma_defaults;
+        if ![s.v, s.v0, s.a, s.m, s.h].iter().all(|&v| pos(v)) {
+            return Err(TrackError::Config("sigma_defaults: finite, > 0"));
+        }
+        if self.cues.0 > 15 {
+            return Err(TrackError::Config("cues: bits 0–3 only"));
+        }
+        Ok(())
+    }
+}
+
+/// Why the tracker refused a call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum TrackError {
+    /// A Table I parameter is invalid.
+    Params(ParamError),
+    /// The tracking configuration or the capacities are invalid.
+    Config(&'static str),
+    /// Frame indices must increase.
+    FrameOrder {
+        /// Last frame stepped.
+        last: u32,
+        /// Frame given.
+        got: u32,
+    },
+}
+
+impl fmt::Display for TrackError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            TrackError::Params(e) => write!(f, "{e}"),
+            TrackError::Config(w) => write!(f, "tracker configuration: {w}"),
+            TrackError::FrameOrder { last, got } => {
+                write!(f, "frame {got} does not follow frame {last}")
+            }
+        }
+    }
+}
+
+impl core::error::Error for TrackError {}
+
+impl From<ParamError> for TrackError {
+    fn from(e: ParamError) -> Self {
+        TrackError::Params(e)
+    }
+}
+
+/// One committed frame of a track.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PathStep {
+    /// Frame index as given to [`Tracker::step`].
+    pub frame: u32,
+    /// Index of the observation in that frame's slice; `None` when the
+    /// target was lost and carried by its prediction.
+    pub obs: Option<u16>,
+    /// The observation's `pair` field (0 when predicted).
+    pub pair: u16,
+    /// Left position (rectified px, rounded): the observation's centroid or
+    /// the prediction.
+    pub x: i16,
+    /// Left position y.
+    pub y: i16,
+}
+
+/// Why a track ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CloseReason {
+    /// Its prediction reached the border margin (left the field of view).
+    Exit,
+    /// Lost for more than `max_lost` frames in a row.
+    Lost,
+    /// [`Tracker::finish`] was called.
+    End,
+    /// Its best path had joined another target's (the same observations in
+    /// the last two frames): a duplicate, dropped without committing its
+    /// uncommitted stages.
+    Duplicate,
+}
+
+/// What the tracker reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TrackEvent<'a> {
+    /// One frame of a track became final.
+    Frame {
+        /// Track id (1, 2, … in order of birth).
+        track: u32,
+        /// The frame.
+        step: PathStep,
+    },
+    /// A track ended; every frame of it has been reported.
+    Closed {
+        /// Track id.
+        track: u32,
+        /// Why.
+        reason: CloseReason,
+        /// Frame of its first observation.
+        first_frame: u32,
+        /// Frame of its last observation.
+        last_frame: u32,
+        /// Frames with an observation.
+        hits: u32,
+        /// The path, up to `H` steps (predicted frames included).
+        path: &'a [PathStep],
+        /// True when the path had more than `H` steps (the first `H` are kept).
+        truncated: bool,
+    },
+}
+
+/// Receives track events.
+pub trait EventSink {
+    /// One event.
+    fn event(&mut self, e: &TrackEvent<'_>);
+}
+
+impl<F: FnMut(&TrackEvent<'_>)> EventSink for F {
+    fn event(&mut self, e: &TrackEvent<'_>) {
+        self(e)
+    }
+}
+
+/// Counters of skipped or dropped items (capacity overflow is not fatal).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TrackStats {
+    /// Frames stepped.
+    pub frames: u32,
+    /// Observations beyond the N per frame.
+    pub obs_dropped: u32,
+    /// Observations with non-finite coordinates.
+    pub obs_invalid: u32,
+    /// New targets not created because T targets were alive.
+    pub targets_dropped: u32,
+    /// Gated candidates not kept because a stage holds K nodes.
+    pub nodes_dropped: u32,
+    /// Path steps beyond H (not kept in the closed event's path).
+    pub path_steps_dropped: u32,
+    /// Targets born.
+    pub targets_born: u32,
+    /// Tracks closed.
+    pub tracks_closed: u32,
+}
+
+/// An observation with its cost features precomputed for the frame.
+#[derive(Debug, Clone, Copy)]
+struct Cand {
+    obs: u16,
+    pair: u16,
+    left: ViewFeat,
+    right: Option<ViewFeat>,
+    depth: Option<f32>,
+    bbox: Roi,
+    area: u32,
+}
+
+/// Fixed inputs of a frame's edge costs.
+#[derive(Debug, Clone, Copy)]
+struct Ctx {
+    sig: Sigmas,
+    cues: Cues,
+    v_ref: [f32; 2],
+    v_init: [f32; 2],
+    z_ref: f32,
+}
+
+/// Per-camera features of one stereo edge.
+#[derive(Debug, Clone, Copy)]
+struct Edge {
+    cost: f32,
+    left: EdgeFeatures,
+    right: Option<EdgeFeatures>,
+}
+
+fn add(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
+    [a[0] + b[0], a[1] + b[1]]
+}
+
+/// Stereo matching cost c = c^L + c^R (Section IV.C) of the edge from node
+/// state `p` to candidate `c`.
+fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
+    let first = !p.vel_known;
+    let vel = if first { x.v_init } else { p.vel };
+    let depths = (p.depth, c.depth);
+    let fl = edge_features(
+        &p.left,
+        add(p.left.pos, vel),
+        &c.left,
+        depths,
+        x.v_ref,
+        x.z_ref,
+    );
+    let cl = camera_cost(&fl, &x.sig, first, x.cues);
+    match (&p.right, &c.right) {
+        (Some(pr), Some(cr)) => {
+            let fr = edge_features(pr, add(pr.pos, vel), cr, depths, x.v_ref, x.z_ref);
+            let c_r = camera_cost(&fr, &x.sig, first, x.cues);
+            Edge {
+                cost: cl + c_r,
+                left: fl,
+                right: Some(fr),
+            }
+        }
+        _ => Edge {
+            cost: 2.0 * cl,
+            left: fl,
+            right: None,
+        },
+    }
+}
+
+/// State of a real node reached from `p` (eq. 13–14).
+fn real_state(p: &NodeState, cost: f32, c: &Cand, alpha: f32) -> NodeState {
+    let d = [c.left.pos[0] - p.left.pos[0], c.left.pos[1] - p.left.pos[1]];
+    let vel = if p.vel_known {
+        [
+            alpha * d[0] + (1.0 - alpha) * p.vel[0],
+            alpha * d[1] + (1.0 - alpha) * p.vel[1],
+        ]
+    } else {
+        d
+    };
+    NodeState {
+        cost,
+        left: c.left,
+        right: c.right,
+        vel,
+        vel_known: true,
+        depth: c.depth,
+        lost: 0,
+    }
+}
+
+/// State of the predicted (lost) node following `p`.
+fn predicted_state(p: &NodeState, cost: f32, v_init: [f32; 2]) -> NodeState {
+    let vel = if p.vel_known { p.vel } else { v_init };
+    let mut s = *p;
+    s.cost = cost;
+    s.left.pos = add(p.left.pos, vel);
+    if let Some(r) = s.right.as_mut() {
+        r.pos = add(r.pos, vel);
+    }
+    s.lost = p.lost.saturating_add(1);
+    s
+}
+
+fn node_of(s: &NodeState, obs: u16, pair: u16, pred: usize) -> Node {
+    Node {
+        obs,
+        pair,
+        x: round_i16(s.left.pos[0]),
+        y: round_i16(s.left.pos[1]),
+        pred: pred.min(u8::MAX as usize) as u8,
+    }
+}
+
+/// A live target: its trellis and its committed path.
+#[derive(Debug, Clone)]
+struct Target<const D: usize, const K: usize, const H: usize> {
+    id: u32,
+    trellis: Trellis<D, K>,
+    path: heapless::Vec<PathStep, H>,
+    truncated: bool,
+    hits: u32,
+    first_frame: u32,
+    last_frame: u32,
+    closing: Option<CloseReason>,
+}
+
+/// The multi-fish tracker (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct Tracker<const T: usize, const D: usize, const K: usize, const H: usize, const N: usize> {
+    cfg: TrackConfig,
+    targets: heapless::Vec<Target<D, K, H>, T>,
+    next_id: u32,
+    sigma: SigmaEstimator,
+    last_frame: Option<u32>,
+    stats: TrackStats,
+    cands: heapless::Vec<Cand, N>,
+    taken: [bool; N],
+    keys: [[f32; N]; T],
+}
+
+impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: usize>
+    Tracker<T, D, K, H, N>
+{
+    /// A tracker with no targets. Fails on an invalid configuration or
+    /// capacities (D ≥ 2, 2 ≤ K ≤ 255, 1 ≤ N < 65535, T ≥ 1).
+    pub fn new(cfg: TrackConfig) -> Result<Self, TrackError> {
+        if D < 2 || !(2..=255).contains(&K) || N == 0 || N >= u16::MAX as usize || T == 0 {
+            return Err(TrackError::Config(
+                "capacities: D ≥ 2, 2 ≤ K ≤ 255, 1 ≤ N < 65535, T ≥ 1",
+            ));
+        }
+        cfg.validate(D)?;
+        Ok(Tracker {
+            cfg,
+            targets: heapless::Vec::new(),
+            next_id: 1,
+            sigma: SigmaEstimator::new(),
+            last_frame: None,
+            stats: TrackStats::default(),
+            cands: heapless::Vec::new(),
+            taken: [false; N],
+            keys: [[f32::INFINITY; N]; T],
+        })
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> TrackStats {
+        self.stats
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TrackConfig {
+        &self.cfg
+    }
+
+    /// Number of live targets.
+    pub fn live_targets(&self) -> usize {
+        self.targets.len()
+    }
+
+    /// The σ² in use for the next frame.
+    pub fn sigmas(&self) -> Sigmas {
+        self.sigma.sigmas(
+            &self.cfg.sigma_defaults,
+            self.cfg.min_sigma_samples as usize,
+        )
+    }
+
+    /// Processes frame `frame` (indices must increase; gaps are allowed and
+    /// treated as one step) with its observations, reporting committed
+    /// frames and closed tracks to `sink`.
+    pub fn step<S: EventSink + ?Sized>(
+        &mut self,
+        frame: u32,
+        observations: &[Observation],
+        params: &Params,
+        sink: &mut S,
+    ) -> Result<(), TrackError> {
+        params.validate()?;
+        if let Some(last) = self.last_frame {
+            if frame <= last {
+                return Err(TrackError::FrameOrder { last, got: frame });
+            }
+        }
+        self.last_frame = Some(frame);
+        self.stats.frames = self.stats.frames.saturating_add(1);
+        self.load(observations);
+        let min = self.cfg.min_sigma_samples as usize;
+        let ctx = Ctx {
+            sig: self.sigma.sigmas(&self.cfg.sigma_defaults, min),
+            cues: self.cfg.cues,
+            v_ref: [params.v_ref_x, params.v_ref_y],
+            v_init: self.sigma.v_init(min),
+            z_ref: self.cfg.z_ref_mm,
+        };
+        match params.tracker {
+            Association::Viterbi => self.step_viterbi(frame, &ctx, params, sink),
+            Association::Mc | Association::Nn => self.step_greedy(frame, &ctx, params, sink),
+        }
+        if params.tracker == Association::Viterbi {
+            self.drop_duplicates(sink);
+        }
+        self.targets.retain(|t| t.closing.is_none());
+        self.births(frame, params);
+        Ok(())
+    }
+
+    /// Closes every live target (reason [`CloseReason::End`]), reporting the
+    /// rest of their paths. The tracker can then be reused for a new haul.
+    pub fn finish<S: EventSink + ?Sized>(&mut self, sink: &mut S) {
+        for t in self.targets.iter_mut() {
+            close(t, CloseReason::End, &mut self.stats, sink);
+        }
+        self.targets.clear();
+        self.last_frame = None;
+    }
+
+    /// Precomputes the frame's candidates.
+    fn load(&mut self, observations: &[Observation]) {
+        self.cands.clear();
+        for t in self.taken.iter_mut() {
+            *t = false;
+        }
+        for (i, o) in observations.iter().enumerate() {
+            if i >= N {
+                self.stats.obs_dropped = self.stats.obs_dropped.saturating_add(1);
+                continue;
+            }
+            if !o.is_valid() {
+                self.stats.obs_invalid = self.stats.obs_invalid.saturating_add(1);
+                continue;
+            }
+            let view = |v: &CameraView| ViewFeat {
+                pos: [v.cx, v.cy],
+                area: v.area as f32,
+                cdf: cdf(&v.hist),
+            };
+            let _ = self.cands.push(Cand {
+                obs: i as u16,
+                pair: o.pair,
+                left: view(&o.left),
+                right: o.right.as_ref().map(view),
+                depth: o.depth(),
+                bbox: o.left.bbox,
+                area: o.left.area,
+            });
+        }
+    }
+
+    fn step_viterbi<S: EventSink + ?Sized>(
+        &mut self,
+        frame: u32,
+        ctx: &Ctx,
+        params: &Params,
+        sink: &mut S,
+    ) {
+        let cfg = self.cfg;
+        for t in self.targets.iter_mut() {
+            if t.trellis.len() >= D {
+                commit(t, &mut self.stats, sink);
+            }
+            let mut nodes: heapless::Vec<Node, K> = heapless::Vec::new();
+            let mut states: heapless::Vec<NodeState, K> = heapless::Vec::new();
+            // Real candidates: the K − 1 cheapest C_j, sorted by (C_j, j).
+            let mut best: heapless::Vec<(f32, usize, usize, f32), K> = heapless::Vec::new();
+            for (ci, c) in self.cands.iter().enumerate() {
+                let mut b: Option<(usize, f32, f32)> = None; // (pred, C, c)
+                for (i, s) in t.trellis.front.iter().enumerate() {
+                    let e = edge(s, c, ctx);
+                    if e.cost.partial_cmp(&cfg.gate_cost) != Some(core::cmp::Ordering::Less) {
+                        continue;
+                    }
+                    let acc = s.cost + e.cost;
+                    if b.is_none_or(|(_, bc, _)| acc < bc) {
+                        b = Some((i, acc, e.cost));
+                    }
+                }
+                let Some((pi, acc, ec)) = b else {
+                    continue;
+                };
+                let pos = best
+                    .iter()
+                    .position(|&(bc, _, _, _)| acc < bc)
+                    .unwrap_or(best.len());
+                if best.len() < K - 1 {
+                    let _ = best.insert(pos, (acc, ci, pi, ec));
+                } else {
+                    self.stats.nodes_dropped = self.stats.nodes_dropped.saturating_add(1);
+                    if pos < best.len() {
+                        best.pop();
+                        let _ = best.insert(pos, (acc, ci, pi, ec));
+                    }
+                }
+            }
+            for &(acc, ci, pi, _) in best.iter() {
+                let (Some(c), Some(p)) = (self.cands.get(ci), t.trellis.front.get(pi)) else {
+                    continue;
+                };
+                let s = real_state(p, acc, c, params.alpha);
+                let _ = nodes.push(node_of(&s, c.obs, c.pair, pi));
+                let _ = states.push(s);
+            }
+            // The predicted node, from the cheapest front node (the target
+            // dies in `advance` if it wins after max_lost lost frames).
+            let mut lp: Option<(usize, f32)> = None;
+            for (i, s) in t.trellis.front.iter().enumerate() {
+                if lp.is_none_or(|(_, c)| s.cost < c) {
+                    lp = Some((i, s.cost));
+                }
+            }
+            if let Some((i, c)) = lp {
+                if let Some(p) = t.trellis.front.get(i) {
+                    let s = predicted_state(p, c + cfg.miss_cost, ctx.v_init);
+                    let _ = nodes.push(node_of(&s, PREDICTED, 0, i));
+                    let _ = states.push(s);
+                }
+            }
+            advance(
+                t,
+                frame,
+                &nodes,
+                &states,
+                &self.cands,
+                ctx,
+                &cfg,
+                params,
+                &mut self.sigma,
+                &mut self.taken,
+                &mut self.stats,
+                sink,
+            );
+        }
+    }
+
+    fn step_greedy<S: EventSink + ?Sized>(
+        &mut self,
+        frame: u32,
+        ctx: &Ctx,
+        params: &Params,
+        sink: &mut S,
+    ) {
+        let cfg = self.cfg;
+        let nn = params.tracker == Association::Nn;
+        for (t, row) in self.targets.iter_mut().zip(self.keys.iter_mut()) {
+            if t.trellis.len() >= D {
+                commit(t, &mut self.stats, sink);
+            }
+            for k in row.iter_mut() {
+                *k = f32::INFINITY;
+            }
+            let Some(p) = t.trellis.best_front().and_then(|b| t.trellis.front.get(b)) else {
+                continue;
+            };
+            for (c, k) in self.cands.iter().zip(row.iter_mut()) {
+                let e = edge(p, c, ctx);
+                if nn {
+                    let s2 = if p.vel_known { ctx.sig.v } else { ctx.sig.v0 };
+                    if e.left.d2 / s2 < cfg.nn_gate {
+                        *k = e.left.d2;
+                    }
+                } else if e.cost < cfg.gate_cost && e.cost < cfg.miss_cost {
+                    *k = e.cost;
+                }
+            }
+        }
+        let live = self.targets.len().min(T);
+        let mut assign = [None; T];
+        greedy_assign_rows(&self.keys, live, self.cands.len(), &mut assign);
+        for (t, a) in self.targets.iter_mut().zip(assign.iter()) {
+            let mut nodes: heapless::Vec<Node, K> = heapless::Vec::new();
+            let mut states: heapless::Vec<NodeState, K> = heapless::Vec::new();
+            if let Some(pi) = t.trellis.best_front() {
+                if let Some(p) = t.trellis.front.get(pi) {
+                    match a.and_then(|ci| self.cands.get(ci as usize)) {
+                        Some(c) => {
+                            let e = edge(p, c, ctx);
+                            let s = real_state(p, p.cost + e.cost, c, params.alpha);
+                            let _ = nodes.push(node_of(&s, c.obs, c.pair, pi));
+                            let _ = states.push(s);
+                        }
+                        None if p.lost < cfg.max_lost => {
+                            let s = predicted_state(p, p.cost + cfg.miss_cost, ctx.v_init);
+                            let _ = nodes.push(node_of(&s, PREDICTED, 0, pi));
+                            let _ = states.push(s);
+                        }
+                        None => {}
+                    }
+                }
+            }
+            advance(
+                t,
+                frame,
+                &nodes,
+                &states,
+                &self.cands,
+                ctx,
+                &cfg,
+                params,
+                &mut self.sigma,
+                &mut self.taken,
+                &mut self.stats,
+                sink,
+            );
+        }
+    }
+
+    /// Drops duplicate trellises (see the module documentation). O(T²) per
+    /// frame.
+    fn drop_duplicates<S: EventSink + ?Sized>(&mut self, sink: &mut S) {
+        let n = self.targets.len();
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let (Some(a), Some(b)) = (self.targets.get(i), self.targets.get(j)) else {
+                    continue;
+                };
+                if a.closing.is_some() || b.closing.is_some() {
+                    continue;
+                }
+                let ka = last_two(&a.trellis);
+                let same_two = ka.is_some() && ka == last_two(&b.trellis);
+                let la = last_obs(&a.trellis);
+                let newborn = |t: &Target<D, K, H>| t.hits == 0 && t.trellis.len() == 2;
+                let same_newborn =
+                    la.is_some() && la == last_obs(&b.trellis) && (newborn(a) || newborn(b));
+                if !same_two && !same_newborn {
+                    continue;
+                }
+                let (ea, eb) = (evidence(a), evidence(b));
+                let drop = if eb > ea || (eb == ea && best_cost(b) < best_cost(a)) {
+                    i
+                } else {
+                    j
+                };
+                if let Some(t) = self.targets.get_mut(drop) {
+                    close(t, CloseReason::Duplicate, &mut self.stats, sink);
+                }
+            }
+        }
+    }
+
+    /// New targets from unassociated observations (see the module docs).
+    fn births(&mut self, frame: u32, params: &Params) {
+        let (w, h, m) = (self.cfg.width, self.cfg.height, params.margin);
+        let big = self.cfg.birth_area_factor * params.area_min as f32;
+        for c in self.cands.iter() {
+            if self.taken.get(c.obs as usize).copied().unwrap_or(true) {
+                continue;
+            }
+            let b = &c.bbox;
+            let near_border = b.x < m
+                || b.y < m
+                || b.right().saturating_add(m) > w
+                || b.bottom().saturating_add(m) > h;
+            if !near_border && (c.area as f32) < big {
+                continue;
+            }
+            let s = NodeState {
+                cost: 0.0,
+                left: c.left,
+                right: c.right,
+                vel: [0.0, 0.0],
+                vel_known: false,
+                depth: c.depth,
+                lost: 0,
+            };
+            let mut t = Target {
+                id: self.next_id,
+                trellis: Trellis::new(),
+                path: heapless::Vec::new(),
+                truncated: false,
+                hits: 0,
+                first_frame: frame,
+                last_frame: frame,
+                closing: None,
+            };
+            if !t
+                .trellis
+                .push(frame, &[node_of(&s, c.obs, c.pair, 0)], &[s])
+            {
+                continue;
+            }
+            if self.targets.push(t).is_err() {
+                self.stats.targets_dropped = self.stats.targets_dropped.saturating_add(1);
+                continue;
+            }
+            self.next_id = self.next_id.wrapping_add(1);
+            self.stats.targets_born = self.stats.targets_born.saturating_add(1);
+        }
+    }
+}
+
+fn greedy_assign_rows<const T: usize, const N: usize>(
+    keys: &[[f32; N]; T],
+    rows: usize,
+    cols: usize,
+    out: &mut [Option<u16>; T],
+) {
+    let rows = rows.min(T);
+    if let (Some(k), Some(o)) = (keys.get(..rows), out.get_mut(..rows)) {
+        greedy::greedy_assign(k, cols, o);
+    }
+}
+
+/// Pushes the new stage of a target (or closes it when the stage is empty),
+/// records its minimum-cost node (set S, σ samples) and tests its exit.
+#[allow(clippy::too_many_arguments)]
+fn advance<
+    const D: usize,
+    const K: usize,
+    const H: usize,
+    const N: usize,
+    S: EventSink + ?Sized,
+>(
+    t: &mut Target<D, K, H>,
+    frame: u32,
+    nodes: &[Node],
+    states: &[NodeState],
+    cands: &heapless::Vec<Cand, N>,
+    ctx: &Ctx,
+    cfg: &TrackConfig,
+    params: &Params,
+    sigma: &mut SigmaEstimator,
+    taken: &mut [bool; N],
+    stats: &mut TrackStats,
+    sink: &mut S,
+) {
+    if nodes.is_empty() {
+        close(t, CloseReason::Lost, stats, sink);
+        return;
+    }
+    // argmin_j C_j(t), first on ties.
+    let mut bi = 0usize;
+    for (i, s) in states.iter().enumerate() {
+        if states.get(bi).is_some_and(|b| s.cost < b.cost) {
+            bi = i;
+        }
+    }
+    if let (Some(n), Some(_)) = (nodes.get(bi), states.get(bi)) {
+        if n.obs != PREDICTED {
+            if let Some(tk) = taken.get_mut(n.obs as usize) {
+                *tk = true;
+            }
+            let c = cands.iter().find(|c| c.obs == n.obs);
+            let p = t.trellis.front.get(n.pred as usize);
+            if let (Some(c), Some(p)) = (c, p) {
+                let e = edge(p, c, ctx);
+                let first = !p.vel_known;
+                sigma.push_features(&e.left, first);
+                if let Some(r) = e.right.as_ref() {
+                    sigma.push_features(r, first);
+                }
+                sigma.push_velocity([c.left.pos[0] - p.left.pos[0], c.left.pos[1] - p.left.pos[1]]);
+            }
+        }
+    }
+    if !t.trellis.push(frame, nodes, states) {
+        // Cannot happen (the caller committed); keep the target alive as is.
+        return;
+    }
+    let lost_now = nodes.get(bi).is_some_and(|n| n.obs == PREDICTED);
+    if let (Some(s), true) = (states.get(bi), lost_now) {
+        if s.vel_known {
+            let p = s.left.pos;
+            let m = params.margin as f32;
+            let (w, h) = (cfg.width as f32, cfg.height as f32);
+            if !(p[0] >= m && p[0] < w - m && p[1] >= m && p[1] < h - m) {
+                close(t, CloseReason::Exit, stats, sink);
+                return;
+            }
+        }
+        if s.lost > cfg.max_lost {
+            close(t, CloseReason::Lost, stats, sink);
+        }
+    }
+}
+
+/// Observation of the best front node, if real.
+fn last_obs<const D: usize, const K: usize>(t: &Trellis<D, K>) -> Option<u16> {
+    let n = t.len();
+    let last = t.stage(n.checked_sub(1)?)?.nodes.get(t.best_front()?)?;
+    (last.obs != PREDICTED).then_some(last.obs)
+}
+
+/// C of the best front node.
+fn best_cost<const D: usize, const K: usize, const H: usize>(t: &Target<D, K, H>) -> f32 {
+    t.trellis
+        .best_front()
+        .and_then(|b| t.trellis.front.get(b))
+        .map_or(f32::INFINITY, |s| s.cost)
+}
+
+/// Observations of the best path's last two stages, if both are real.
+fn last_two<const D: usize, const K: usize>(t: &Trellis<D, K>) -> Option<(u16, u16)> {
+    let n = t.len();
+    if n < 2 {
+        return None;
+    }
+    let last = t.stage(n - 1)?.nodes.get(t.best_front()?)?;
+    let prev = t.stage(n - 2)?.nodes.get(last.pred as usize)?;
+    (last.obs != PREDICTED && prev.obs != PREDICTED).then_some((last.obs, prev.obs))
+}
+
+/// Observations on a target's path: committed hits + real nodes of the
+/// uncommitted best path.
+fn evidence<const D: usize, const K: usize, const H: usize>(t: &Target<D, K, H>) -> u32 {
+    let mut path = [0u8; D];
+    let mut n = t.hits;
+    if t.trellis
+        .best_front()
+        .is_some_and(|b| t.trellis.backtrack(b, &mut path))
+    {
+        for s in 0..t.trellis.len() {
+            let real = t
+                .trellis
+                .stage(s)
+                .and_then(|st| st.nodes.get(path.get(s).copied().unwrap_or(0) as usize))
+                .is_some_and(|nd| nd.obs != PREDICTED);
+            n += real as u32;
+        }
+    }
+    n
+}
+
+/// Appends a committed step to the target's path and reports it.
+fn record<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>(
+    t: &mut Target<D, K, H>,
+    frame: u32,
+    node: &Node,
+    stats: &mut TrackStats,
+    sink: &mut S,
+) {
+    let step = PathStep {
+        frame,
+        obs: if node.obs == PREDICTED {
+            None
+        } else {
+            Some(node.obs)
+        },
+        pair: node.pair,
+        x: node.x,
+        y: node.y,
+    };
+    if step.obs.is_some() {
+        t.hits = t.hits.saturating_add(1);
+        t.last_frame = frame;
+    }
+    if t.path.push(step).is_err() {
+        t.truncated = true;
+        stats.path_steps_dropped = stats.path_steps_dropped.saturating_add(1);
+    }
+    sink.event(&TrackEvent::Frame { track: t.id, step });
+}
+
+/// Commits the target's oldest stage.
+fn commit<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>(
+    t: &mut Target<D, K, H>,
+    stats: &mut TrackStats,
+    sink: &mut S,
+) {
+    if let Some((frame, node)) = t.trellis.commit_oldest() {
+        record(t, frame, &node, stats, sink);
+    }
+}
+
+/// Backtracks the best path, commits it up to its last observation and
+/// reports the closed track.
+fn close<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>(
+    t: &mut Target<D, K, H>,
+    reason: CloseReason,
+    stats: &mut TrackStats,
+    sink: &mut S,
+) {
+    if t.closing.is_some() {
+        return;
+    }
+    t.closing = Some(reason);
+    let mut path = [0u8; D];
+    let ok = reason != CloseReason::Duplicate
+        && t.trellis
+            .best_front()
+            .is_some_and(|b| t.trellis.backtrack(b, &mut path));
+    if ok {
+        let n = t.trellis.len();
+        let mut last_real = None;
+        for s in 0..n {
+            let node = t
+                .trellis
+                .stage(s)
+                .and_then(|st| st.nodes.get(path.get(s).copied().unwrap_or(0) as usize));
+            if node.is_some_and(|nd| nd.obs != PREDICTED) {
+                last_real = Some(s);
+            }
+        }
+        if let Some(lr) = last_real {
+            for s in 0..=lr {
+                let step = t.trellis.stage(s).and_then(|st| {
+                    st.nodes
+                        .get(path.get(s).copied().unwrap_or(0) as usize)
+                        .map(|nd| (st.frame, *nd))
+                });
+                if let Some((frame, node)) = step {
+                    record(t, frame, &node, stats, sink);
+                }
+            }
+        }
+    }
+    stats.tracks_closed = stats.tracks_closed.saturating_add(1);
+    sink.event(&TrackEvent::Closed {
+        track: t.id,
+        reason,
+        first_frame: t.first_frame,
+        last_frame: t.last_frame,
+        hits: t.hits,
+        path: &t.path,
+        truncated: t.truncated,
+    });
+}
+
+#[cfg(test)]
+mod tests;

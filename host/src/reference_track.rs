@@ -1,0 +1,711 @@
+//! Float reference of the tracker (core `track`, paper Sections IV.B–C):
+//! the same association rules written plainly in `f64` with growable
+//! vectors, as the yardstick for "identical track assignments".
+//!
+//! What must match the core exactly (the rules, not the code): cue
+//! definitions and σ estimation (last 128 chosen-edge samples per cue,
+//! median rank ⌊n/2⌋ / 0.4549, clamped to [default/16, 16·default], after
+//! `min_sigma_samples`); the candidate gate; K − 1 cheapest real nodes plus
+//! one predicted node per stage; commit of the oldest stage along the best
+//! path with pruning at depth D; births (border margin or large area) and
+//! deaths (exit margin, `max_lost`); greedy MC/NN; capacities T, D, K, N.
+//! Differences that are allowed: f64 instead of f32, exact histogram CDFs
+//! instead of 16-bit fixed point.
+#![allow(clippy::needless_range_loop)] // index loops mirror the paper's notation
+
+use fishtrack_core::params::{Params, Tracker as Assoc};
+use fishtrack_core::track::{Observation, TrackConfig};
+
+/// Capacities mirrored from the core's const generics.
+#[derive(Debug, Clone, Copy)]
+pub struct Capacities {
+    /// Live targets (T).
+    pub targets: usize,
+    /// Trellis depth (D).
+    pub depth: usize,
+    /// Nodes per stage (K).
+    pub nodes: usize,
+    /// Observations per frame (N).
+    pub obs: usize,
+}
+
+impl Capacities {
+    /// The core's `DefaultTracker`.
+    pub const DEFAULT: Capacities = Capacities {
+        targets: 32,
+        depth: 16,
+        nodes: 8,
+        obs: 64,
+    };
+}
+
+/// One committed frame of a track: observation index or `None` (predicted).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Assignment {
+    /// Frame index.
+    pub frame: u32,
+    /// Track id.
+    pub track: u32,
+    /// Observation index in the frame, `None` when predicted.
+    pub obs: Option<u16>,
+}
+
+/// Result of [`compare`].
+#[derive(Debug, Clone, Default)]
+pub struct Agreement {
+    /// Assignments in both.
+    pub same: usize,
+    /// Only in the first list (up to 10 shown).
+    pub only_a: Vec<Assignment>,
+    /// Only in the second list (up to 10 shown).
+    pub only_b: Vec<Assignment>,
+    /// Total differing assignments.
+    pub differing: usize,
+}
+
+impl Agreement {
+    /// True when both lists hold the same assignments.
+    pub fn identical(&self) -> bool {
+        self.differing == 0
+    }
+}
+
+/// Compares two assignment lists as sets (order-free).
+pub fn compare(a: &[Assignment], b: &[Assignment]) -> Agreement {
+    let mut x = a.to_vec();
+    let mut y = b.to_vec();
+    x.sort();
+    y.sort();
+    let mut r = Agreement::default();
+    let (mut i, mut j) = (0, 0);
+    while i < x.len() || j < y.len() {
+        match (x.get(i), y.get(j)) {
+            (Some(p), Some(q)) if p == q => {
+                r.same += 1;
+                i += 1;
+                j += 1;
+            }
+            (Some(p), Some(q)) if p < q => {
+                r.differing += 1;
+                if r.only_a.len() < 10 {
+                    r.only_a.push(*p);
+                }
+                i += 1;
+            }
+            (Some(p), None) => {
+                r.differing += 1;
+                if r.only_a.len() < 10 {
+                    r.only_a.push(*p);
+                }
+                i += 1;
+            }
+            (_, Some(q)) => {
+                r.differing += 1;
+                if r.only_b.len() < 10 {
+                    r.only_b.push(*q);
+                }
+                j += 1;
+            }
+            (None, None) => break,
+        }
+    }
+    r
+}
+
+#[derive(Debug, Clone)]
+struct View {
+    pos: [f64; 2],
+    area: f64,
+    cdf: Option<[f64; 15]>,
+}
+
+#[derive(Debug, Clone)]
+struct Cand {
+    obs: usize,
+    left: View,
+    right: Option<View>,
+    depth: Option<f64>,
+    bbox: (u32, u32, u32, u32),
+    area: f64,
+}
+
+#[derive(Debug, Clone)]
+struct State {
+    cost: f64,
+    left: View,
+    right: Option<View>,
+    vel: [f64; 2],
+    vel_known: bool,
+    depth: Option<f64>,
+    lost: u32,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    obs: Option<usize>,
+    pred: usize,
+}
+
+struct Target {
+    id: u32,
+    hits: u32,
+    stages: Vec<(u32, Vec<Node>)>,
+    front: Vec<State>,
+    closed: bool,
+}
+
+#[derive(Default)]
+struct Sig {
+    v: Vec<f64>,
+    v0: Vec<f64>,
+    a: Vec<f64>,
+    m: Vec<f64>,
+    h: Vec<f64>,
+    vx: Vec<f64>,
+    vy: Vec<f64>,
+}
+
+const WINDOW: usize = 128;
+
+fn push(v: &mut Vec<f64>, x: f64) {
+    if x.is_finite() {
+        v.push(x);
+        if v.len() > WINDOW {
+            v.remove(0);
+        }
+    }
+}
+
+fn median(v: &[f64], min: usize) -> Option<f64> {
+    if v.len() < min.max(1) {
+        return None;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    Some(s[s.len() / 2])
+}
+
+struct Costs {
+    s: [f64; 5], // v v0 a m h
+    cues: u8,
+    v_ref: [f64; 2],
+    v_init: [f64; 2],
+    z_ref: f64,
+}
+
+struct Feat {
+    d2: f64,
+    a2: f64,
+    m2: f64,
+    h2: f64,
+}
+
+fn cdf(h: &[u32; 16]) -> Option<[f64; 15]> {
+    let t: f64 = h.iter().map(|&x| x as f64).sum();
+    if t == 0.0 {
+        return None;
+    }
+    let mut c = [0.0; 15];
+    let mut acc = 0.0;
+    for b in 0..15 {
+        acc += h[b] as f64;
+        c[b] = acc / t;
+    }
+    Some(c)
+}
+
+fn feat(p: &View, pred: [f64; 2], c: &View, depths: (Option<f64>, Option<f64>), k: &Costs) -> Feat {
+    let norm = |a: f64, z: Option<f64>| match (depths, z) {
+        ((Some(_), Some(_)), Some(z)) => a * (z / k.z_ref).powi(2),
+        _ => a,
+    };
+    let an = norm(p.area, depths.0);
+    let bn = norm(c.area, depths.1);
+    let rel = if an + bn > 0.0 {
+        2.0 * (an - bn).abs() / (an + bn)
+    } else {
+        0.0
+    };
+    let v = [c.pos[0] - p.pos[0], c.pos[1] - p.pos[1]];
+    let th = if v[0] * v[0] + v[1] * v[1] < 1.0 {
+        0.0
+    } else {
+        // Angle between v and v_ref by the cosine formula, eq. (7).
+        let cos = (v[0] * k.v_ref[0] + v[1] * k.v_ref[1])
+            / (v[0].hypot(v[1]) * k.v_ref[0].hypot(k.v_ref[1]));
+        cos.clamp(-1.0, 1.0).acos()
+    };
+    let emd = match (&p.cdf, &c.cdf) {
+        (Some(a), Some(b)) => a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum(),
+        _ => 0.0,
+    };
+    Feat {
+        d2: (c.pos[0] - pred[0]).powi(2) + (c.pos[1] - pred[1]).powi(2),
+        a2: rel * rel,
+        m2: th * th,
+        h2: emd * emd,
+    }
+}
+
+fn cam_cost(f: &Feat, k: &Costs, first: bool) -> f64 {
+    let mut c = 0.0;
+    if k.cues & 1 != 0 {
+        c += f.d2 / if first { k.s[1] } else { k.s[0] };
+    }
+    if k.cues & 2 != 0 {
+        c += f.a2 / k.s[2];
+    }
+    if k.cues & 4 != 0 {
+        c += f.m2 / k.s[3];
+    }
+    if k.cues & 8 != 0 {
+        c += f.h2 / k.s[4];
+    }
+    c
+}
+
+/// Stereo edge: (cost, left features, right features).
+fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
+    let first = !p.vel_known;
+    let v = if first { k.v_init } else { p.vel };
+    let d = (p.depth, c.depth);
+    let fl = feat(
+        &p.left,
+        [p.left.pos[0] + v[0], p.left.pos[1] + v[1]],
+        &c.left,
+        d,
+        k,
+    );
+    let cl = cam_cost(&fl, k, first);
+    match (&p.right, &c.right) {
+        (Some(pr), Some(cr)) => {
+            let fr = feat(pr, [pr.pos[0] + v[0], pr.pos[1] + v[1]], cr, d, k);
+            let cr_ = cam_cost(&fr, k, first);
+            (cl + cr_, fl, Some(fr))
+        }
+        _ => (2.0 * cl, fl, None),
+    }
+}
+
+/// Runs the reference tracker over all frames and returns every committed
+/// assignment (after the final flush).
+pub fn run(
+    frames: &[Vec<Observation>],
+    p: &Params,
+    cfg: &TrackConfig,
+    cap: Capacities,
+) -> Vec<Assignment> {
+    let mut out = Vec::new();
+    let mut targets: Vec<Target> = Vec::new();
+    let mut sig = Sig::default();
+    let mut next_id = 1u32;
+    let d0 = &cfg.sigma_defaults;
+    let defaults = [
+        d0.v as f64,
+        d0.v0 as f64,
+        d0.a as f64,
+        d0.m as f64,
+        d0.h as f64,
+    ];
+    let min = cfg.min_sigma_samples as usize;
+    let alpha = p.alpha as f64;
+    let miss = cfg.miss_cost as f64;
+    let gate = cfg.gate_cost as f64;
+    let (w, h, m) = (cfg.width as f64, cfg.height as f64, p.margin as f64);
+
+    for (fi, obs) in frames.iter().enumerate() {
+        let frame = fi as u32;
+        let view = |v: &fishtrack_core::track::CameraView| View {
+            pos: [v.cx as f64, v.cy as f64],
+            area: v.area as f64,
+            cdf: cdf(&v.hist),
+        };
+        let cands: Vec<Cand> = obs
+            .iter()
+            .enumerate()
+            .take(cap.obs)
+            .filter(|(_, o)| o.is_valid())
+            .map(|(i, o)| Cand {
+                obs: i,
+                left: view(&o.left),
+                right: o.right.as_ref().map(view),
+                depth: o.depth().map(|z| z as f64),
+                bbox: (
+                    o.left.bbox.x,
+                    o.left.bbox.y,
+                    o.left.bbox.right(),
+                    o.left.bbox.bottom(),
+                ),
+                area: o.left.area as f64,
+            })
+            .collect();
+        let lists = [&sig.v, &sig.v0, &sig.a, &sig.m, &sig.h];
+        let mut s = [0.0; 5];
+        for i in 0..5 {
+            s[i] = match median(lists[i], min) {
+                Some(x) => {
+                    (x / 0.454_936_4f32 as f64).clamp(defaults[i] / 16.0, defaults[i] * 16.0)
+                }
+                None => defaults[i],
+            };
+        }
+        let v_init = match (median(&sig.vx, min), median(&sig.vy, min)) {
+            (Some(x), Some(y)) => [x, y],
+            _ => [0.0, 0.0],
+        };
+        let k = Costs {
+            s,
+            cues: cfg.cues.0,
+            v_ref: [p.v_ref_x as f64, p.v_ref_y as f64],
+            v_init,
+            z_ref: cfg.z_ref_mm as f64,
+        };
+        let mut taken = vec![false; obs.len()];
+
+        // Greedy assignment for MC / NN, on each target's single front node.
+        let mut greedy: Vec<Option<usize>> = vec![None; targets.len()];
+        if p.tracker != Assoc::Viterbi {
+            let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+            for (ti, t) in targets.iter().enumerate() {
+                let st = &t.front[0];
+                for (ci, c) in cands.iter().enumerate() {
+                    let (cost, fl, _) = edge(st, c, &k);
+                    let key = if p.tracker == Assoc::Nn {
+                        let s2 = if st.vel_known { k.s[0] } else { k.s[1] };
+                        (fl.d2 / s2 < cfg.nn_gate as f64).then_some(fl.d2)
+                    } else {
+                        (cost < gate && cost < miss).then_some(cost)
+                    };
+                    if let Some(key) = key {
+                        pairs.push((key, ti, ci));
+                    }
+                }
+            }
+            pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            let mut used = vec![false; cands.len()];
+            for (_, ti, ci) in pairs {
+                if greedy[ti].is_none() && !used[ci] {
+                    greedy[ti] = Some(ci);
+                    used[ci] = true;
+                }
+            }
+        }
+
+        for ti in 0..targets.len() {
+            let t = &mut targets[ti];
+            if t.stages.len() >= cap.depth {
+                commit_oldest(t, &mut out);
+            }
+            // New stage: (state, node).
+            let mut new: Vec<(State, Node)> = Vec::new();
+            let mk_real = |pst: &State, pi: usize, acc: f64, c: &Cand| -> (State, Node) {
+                let d = [
+                    c.left.pos[0] - pst.left.pos[0],
+                    c.left.pos[1] - pst.left.pos[1],
+                ];
+                let vel = if pst.vel_known {
+                    [
+                        alpha * d[0] + (1.0 - alpha) * pst.vel[0],
+                        alpha * d[1] + (1.0 - alpha) * pst.vel[1],
+                    ]
+                } else {
+                    d
+                };
+                (
+                    State {
+                        cost: acc,
+                        left: c.left.clone(),
+                        right: c.right.clone(),
+                        vel,
+                        vel_known: true,
+                        depth: c.depth,
+                        lost: 0,
+                    },
+                    Node {
+                        obs: Some(c.obs),
+                        pred: pi,
+                    },
+                )
+            };
+            let mk_pred = |pst: &State, pi: usize| -> (State, Node) {
+                let v = if pst.vel_known { pst.vel } else { v_init };
+                let mut s = pst.clone();
+                s.cost = pst.cost + miss;
+                s.left.pos = [pst.left.pos[0] + v[0], pst.left.pos[1] + v[1]];
+                if let Some(r) = s.right.as_mut() {
+                    r.pos = [r.pos[0] + v[0], r.pos[1] + v[1]];
+                }
+                s.lost = pst.lost + 1;
+                (
+                    s,
+                    Node {
+                        obs: None,
+                        pred: pi,
+                    },
+                )
+            };
+            if p.tracker == Assoc::Viterbi {
+                let mut real: Vec<(f64, usize, usize)> = Vec::new(); // (C, cand, pred)
+                for (ci, c) in cands.iter().enumerate() {
+                    let mut best: Option<(f64, usize)> = None;
+                    for (i, st) in t.front.iter().enumerate() {
+                        let (e, _, _) = edge(st, c, &k);
+                        if e < gate && best.is_none_or(|b| st.cost + e < b.0) {
+                            best = Some((st.cost + e, i));
+                        }
+                    }
+                    if let Some((acc, i)) = best {
+                        real.push((acc, ci, i));
+                    }
+                }
+                real.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                real.truncate(cap.nodes - 1);
+                for (acc, ci, pi) in real {
+                    new.push(mk_real(&t.front[pi], pi, acc, &cands[ci]));
+                }
+                let lp = t
+                    .front
+                    .iter()
+                    .enumerate()
+                    .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost).then(a.0.cmp(&b.0)));
+                if let Some((i, st)) = lp {
+                    new.push(mk_pred(st, i));
+                }
+            } else {
+                let st = &t.front[0];
+                match greedy[ti] {
+                    Some(ci) => {
+                        let (e, _, _) = edge(st, &cands[ci], &k);
+                        new.push(mk_real(st, 0, st.cost + e, &cands[ci]));
+                    }
+                    None if st.lost < cfg.max_lost as u32 => new.push(mk_pred(st, 0)),
+                    None => {}
+                }
+            }
+            if new.is_empty() {
+                close(t, &mut out);
+                continue;
+            }
+            let bi =
+                (0..new.len()).fold(0, |b, i| if new[i].0.cost < new[b].0.cost { i } else { b });
+            if let Some(o) = new[bi].1.obs {
+                taken[o] = true;
+                let c = cands.iter().find(|c| c.obs == o).unwrap();
+                let pst = &t.front[new[bi].1.pred];
+                let (_, fl, fr) = edge(pst, c, &k);
+                let first = !pst.vel_known;
+                for f in std::iter::once(fl).chain(fr) {
+                    push(if first { &mut sig.v0 } else { &mut sig.v }, f.d2);
+                    push(&mut sig.a, f.a2);
+                    push(&mut sig.m, f.m2);
+                    push(&mut sig.h, f.h2);
+                }
+                push(&mut sig.vx, c.left.pos[0] - pst.left.pos[0]);
+                push(&mut sig.vy, c.left.pos[1] - pst.left.pos[1]);
+            }
+            let best = new[bi].0.clone();
+            let new_best_lost = new[bi].1.obs.is_none();
+            t.stages.push((frame, new.iter().map(|x| x.1).collect()));
+            t.front = new.into_iter().map(|x| x.0).collect();
+            if best.vel_known && new_best_lost {
+                let q = best.left.pos;
+                if !(q[0] >= m && q[0] < w - m && q[1] >= m && q[1] < h - m) {
+                    close(t, &mut out);
+                }
+            }
+            if new_best_lost && best.lost > cfg.max_lost as u32 {
+                close(t, &mut out);
+            }
+        }
+        // Duplicate trellises: same observations in the last two frames of
+        // their best paths, or the same newest observation when one of them
+        // is a newborn on its first transition. Drop the one with less
+        // evidence, then higher best cost, then the younger.
+        if p.tracker == Assoc::Viterbi {
+            for i in 0..targets.len() {
+                for j in (i + 1)..targets.len() {
+                    if targets[i].closed || targets[j].closed {
+                        continue;
+                    }
+                    let (ki, kj) = (last_two(&targets[i]), last_two(&targets[j]));
+                    let li = last_obs(&targets[i]);
+                    let newborn = |t: &Target| t.hits == 0 && t.stages.len() == 2;
+                    let same_newborn = li.is_some()
+                        && li == last_obs(&targets[j])
+                        && (newborn(&targets[i]) || newborn(&targets[j]));
+                    let same_two = ki.is_some() && ki == kj;
+                    if !same_two && !same_newborn {
+                        continue;
+                    }
+                    let (ei, ej) = (evidence(&targets[i]), evidence(&targets[j]));
+                    let d = if ej > ei
+                        || (ej == ei && best_cost(&targets[j]) < best_cost(&targets[i]))
+                    {
+                        i
+                    } else {
+                        j
+                    };
+                    targets[d].closed = true; // nothing more committed
+                }
+            }
+        }
+        targets.retain(|t| !t.closed);
+
+        // Births.
+        let big = cfg.birth_area_factor as f64 * p.area_min as f64;
+        let mu = p.margin;
+        for c in &cands {
+            if taken[c.obs] {
+                continue;
+            }
+            let (x0, y0, x1, y1) = c.bbox;
+            let near = x0 < mu
+                || y0 < mu
+                || x1.saturating_add(mu) > cfg.width
+                || y1.saturating_add(mu) > cfg.height;
+            if !near && c.area < big {
+                continue;
+            }
+            if targets.len() >= cap.targets {
+                continue;
+            }
+            targets.push(Target {
+                id: next_id,
+                hits: 0,
+                stages: vec![(
+                    frame,
+                    vec![Node {
+                        obs: Some(c.obs),
+                        pred: 0,
+                    }],
+                )],
+                front: vec![State {
+                    cost: 0.0,
+                    left: c.left.clone(),
+                    right: c.right.clone(),
+                    vel: [0.0, 0.0],
+                    vel_known: false,
+                    depth: c.depth,
+                    lost: 0,
+                }],
+                closed: false,
+            });
+            next_id += 1;
+        }
+    }
+    for t in targets.iter_mut() {
+        close(t, &mut out);
+    }
+    out
+}
+
+/// Path (node index per stage) ending at the cheapest front node.
+fn best_path(t: &Target) -> Vec<usize> {
+    let mut b = 0;
+    for (i, s) in t.front.iter().enumerate() {
+        if s.cost < t.front[b].cost {
+            b = i;
+        }
+    }
+    let mut path = vec![0; t.stages.len()];
+    let mut cur = b;
+    for s in (0..t.stages.len()).rev() {
+        path[s] = cur;
+        cur = t.stages[s].1[cur].pred;
+    }
+    path
+}
+
+fn last_obs(t: &Target) -> Option<usize> {
+    let n = t.stages.len();
+    if n == 0 {
+        return None;
+    }
+    let path = best_path(t);
+    t.stages[n - 1].1[path[n - 1]].obs
+}
+
+fn best_cost(t: &Target) -> f64 {
+    t.front.iter().map(|s| s.cost).fold(f64::INFINITY, f64::min)
+}
+
+fn last_two(t: &Target) -> Option<(usize, usize)> {
+    let n = t.stages.len();
+    if n < 2 {
+        return None;
+    }
+    let path = best_path(t);
+    match (
+        t.stages[n - 1].1[path[n - 1]].obs,
+        t.stages[n - 2].1[path[n - 2]].obs,
+    ) {
+        (Some(a), Some(b)) => Some((a, b)),
+        _ => None,
+    }
+}
+
+fn evidence(t: &Target) -> u32 {
+    let path = best_path(t);
+    t.hits
+        + (0..t.stages.len())
+            .filter(|&s| t.stages[s].1[path[s]].obs.is_some())
+            .count() as u32
+}
+
+fn commit_oldest(t: &mut Target, out: &mut Vec<Assignment>) {
+    let path = best_path(t);
+    let chosen = path[0];
+    let (frame, nodes) = t.stages.remove(0);
+    t.hits += nodes[chosen].obs.is_some() as u32;
+    out.push(Assignment {
+        frame,
+        track: t.id,
+        obs: nodes[chosen].obs.map(|o| o as u16),
+    });
+    // Keep only paths through the committed node.
+    let mut keep: Vec<Option<usize>> = (0..nodes.len())
+        .map(|i| (i == chosen).then_some(0))
+        .collect();
+    for (si, (_, stage)) in t.stages.iter_mut().enumerate() {
+        let mut next_keep = vec![None; stage.len()];
+        let mut kept = Vec::new();
+        for (i, n) in stage.iter().enumerate() {
+            if let Some(np) = keep[n.pred] {
+                next_keep[i] = Some(kept.len());
+                kept.push(Node {
+                    obs: n.obs,
+                    pred: if si == 0 { 0 } else { np },
+                });
+            }
+        }
+        *stage = kept;
+        keep = next_keep;
+    }
+    t.front = t
+        .front
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| keep[*i].is_some())
+        .map(|(_, s)| s.clone())
+        .collect();
+}
+
+fn close(t: &mut Target, out: &mut Vec<Assignment>) {
+    if t.closed {
+        return;
+    }
+    t.closed = true;
+    let path = best_path(t);
+    let last_real = (0..t.stages.len())
+        .rev()
+        .find(|&s| t.stages[s].1[path[s]].obs.is_some());
+    if let Some(lr) = last_real {
+        for s in 0..=lr {
+            out.push(Assignment {
+                frame: t.stages[s].0,
+                track: t.id,
+                obs: t.stages[s].1[path[s]].obs.map(|o| o as u16),
+            });
+        }
+    }
+}
