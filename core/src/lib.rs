@@ -17,24 +17,20 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
-#![cfg_attr(
-    not(test),
-    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
-)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used, clippy::panic))]
 
 pub mod error;
 pub mod geometry;
 pub mod image;
+pub mod length;
 pub mod link;
 pub mod object;
 pub mod params;
-pub mod strobe;
-pub mod length;
 pub mod refine;
 pub mod snake;
 pub mod stereo;
+pub mod strobe;
 pub mod track;
 
 pub use error::{ImageError, ParamError};

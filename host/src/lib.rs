@@ -11,10 +11,10 @@ pub mod eval;
 pub mod haul;
 pub mod output;
 pub mod params_file;
-pub mod timing;
-pub mod reference_stereo;
 pub mod reference;
+pub mod reference_stereo;
 pub mod reference_track;
+pub mod timing;
 pub mod truth;
 
 pub use error::InputError;
