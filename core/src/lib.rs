@@ -18,11 +18,13 @@
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used, clippy::panic))]
 
 pub mod error;
 pub mod image;
 pub mod object;
 pub mod params;
+pub mod remap;
 
 pub use error::{ImageError, ParamError};
 pub use image::{ImageView, ImageViewMut, Roi};

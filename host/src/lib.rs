@@ -6,7 +6,9 @@
 //! live in `fishtrack-core`; this crate feeds them and checks them.
 #![deny(missing_docs)]
 
+pub mod calib;
 pub mod error;
+pub mod rectify;
 pub mod truth;
 
 pub use error::InputError;
