@@ -662,12 +662,15 @@ mod tests {
     fn rodrigues_round_trips() {
         for v in [
             Vector3::new(0.1, -0.2, 0.05),
-            Vector3::new(1e-9, 0.0, 0.0),
+            Vector3::new(2e-5, 0.0, 0.0),
             Vector3::new(0.0, 3.0, 0.1),
         ] {
             let m = rodrigues_vec_to_mat(&v);
             assert!((rodrigues_mat_to_vec(&m) - v).norm() < 1e-9, "{v}");
         }
+        // like OpenCV, rotations below ~1e-5 rad read back as none
+        let m = rodrigues_vec_to_mat(&Vector3::new(1e-9, 0.0, 0.0));
+        assert_eq!(rodrigues_mat_to_vec(&m), Vector3::zeros());
         // 180 degrees
         let v = Vector3::new(0.0, std::f64::consts::PI, 0.0);
         let back = rodrigues_mat_to_vec(&rodrigues_vec_to_mat(&v));
