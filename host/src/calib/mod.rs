@@ -402,6 +402,21 @@ fn camera_matrix(item: &Item) -> Result<Matrix3<f64>, InputError> {
     Ok(m)
 }
 
+/// 4, 5 or 8 coefficients; the 12 or 14 of OpenCV's thin-prism and tilted
+/// models are accepted when those extra terms are zero (and dropped).
+fn distortion(item: &Item) -> Result<Vec<f64>, InputError> {
+    let mut d = item.vector(&[4, 5, 8, 12, 14], "distortion vector")?;
+    if d.len() > 8 {
+        if d[8..].iter().any(|v| *v != 0.0) {
+            return Err(item.err(
+                "thin-prism (s1..s4) and tilt (tau_x, tau_y) coefficients are not supported: coefficients 9 and up must be 0",
+            ));
+        }
+        d.truncate(8);
+    }
+    Ok(d)
+}
+
 fn rotation(item: &Item) -> Result<Matrix3<f64>, InputError> {
     let r = item.matrix3()?;
     let dev = (r.transpose() * r - Matrix3::identity()).abs().max();
@@ -434,9 +449,9 @@ fn build(parts: Parts, frame_size: Option<(u32, u32)>) -> Result<StereoCalib, In
         },
     };
     let m1 = camera_matrix(&parts.m1)?;
-    let d1 = parts.d1.vector(&[4, 5, 8], "distortion vector")?;
+    let d1 = distortion(&parts.d1)?;
     let m2 = camera_matrix(&parts.m2)?;
-    let d2 = parts.d2.vector(&[4, 5, 8], "distortion vector")?;
+    let d2 = distortion(&parts.d2)?;
     let r = rotation(&parts.r)?;
     let t = Vector3::from_column_slice(&parts.t.vector(&[3], "translation vector")?);
     if t.norm() < MIN_BASELINE_MM {
@@ -482,6 +497,19 @@ mod tests {
         c.write_yaml(&p).unwrap();
         assert_eq!(StereoCalib::load(&p, None).unwrap(), c);
         assert_eq!(StereoCalib::load(dir.path(), None).unwrap(), c);
+    }
+
+    #[test]
+    fn zero_thin_prism_and_tilt_terms_are_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("calibration.yml");
+        let mut c = sample();
+        c.d2 = vec![
+            -0.1, 0.02, 0.001, 0.0, 0.01, 0.001, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        ];
+        std::fs::write(&p, c.to_yaml()).unwrap();
+        let got = StereoCalib::load(&p, None).unwrap();
+        assert_eq!(got.d2, c.d2[..8].to_vec());
     }
 
     #[test]
@@ -535,6 +563,13 @@ mod tests {
         let mut c = sample();
         c.d1 = vec![0.1; 6];
         check(&c, "D1", "1xN or Nx1");
+        let mut c = sample();
+        c.d1 = vec![0.1; 9];
+        check(&c, "D1", "1xN or Nx1");
+        let mut c = sample();
+        c.d1 = vec![0.0; 14];
+        c.d1[9] = 1e-3;
+        check(&c, "D1", "thin-prism");
         let mut c = sample();
         c.width = 0;
         check(&c, "image_width", "positive");

@@ -116,13 +116,15 @@ fn bracketed<'a>(path: &Path, key: &str, s: &'a str) -> Result<&'a str, InputErr
 }
 
 fn parse_matrix(path: &Path, key: &str, body: &str) -> Result<Node, InputError> {
-    // body: the indented lines of the mapping, joined with '\n'.
+    // body: the text after `key:`, the mapping's indented lines joined with '\n'.
     let mut rows = None;
     let mut cols = None;
     let mut data = None;
-    let mut rest = body;
-    while let Some(line_end) = Some(rest.find('\n').unwrap_or(rest.len())) {
-        let line = rest[..line_end].trim();
+    let mut offset = 0;
+    for line in body.split('\n') {
+        let start = offset;
+        offset += line.len() + 1;
+        let line = line.trim();
         if let Some(v) = line.strip_prefix("rows:") {
             rows = Some(v.trim().parse::<usize>().map_err(|_| {
                 InputError::key(path, key, format!("`rows: {}` is not a count", v.trim()))
@@ -132,15 +134,11 @@ fn parse_matrix(path: &Path, key: &str, body: &str) -> Result<Node, InputError> 
                 InputError::key(path, key, format!("`cols: {}` is not a count", v.trim()))
             })?);
         } else if line.starts_with("data:") {
-            let start = rest.find("data:").unwrap_or(0);
-            let seq = bracketed(path, key, &rest[start..])?;
+            // the list may span this and the following lines
+            let seq = bracketed(path, key, &body[start..])?;
             data = Some(parse_seq(path, key, seq)?);
             break;
         }
-        if line_end >= rest.len() {
-            break;
-        }
-        rest = &rest[line_end + 1..];
     }
     let rows = rows.ok_or_else(|| InputError::key(path, key, "matrix has no `rows`"))?;
     let cols = cols.ok_or_else(|| InputError::key(path, key, "matrix has no `cols`"))?;
@@ -272,32 +270,16 @@ pub fn write_int(out: &mut String, key: &str, v: i64) {
     let _ = writeln!(out, "{key}: {v}");
 }
 
-/// Appends a `rows × cols` double matrix as an `!!opencv-matrix` node.
+/// Appends a `rows × cols` double matrix as an `!!opencv-matrix` node
+/// (four values per line, continuation lines indented like OpenCV's).
 pub fn write_matrix(out: &mut String, key: &str, rows: usize, cols: usize, data: &[f64]) {
     let _ = writeln!(out, "{key}: !!opencv-matrix");
     let _ = writeln!(out, "   rows: {rows}");
     let _ = writeln!(out, "   cols: {cols}");
     let _ = writeln!(out, "   dt: d");
-    let mut line = String::from("   data: [ ");
-    let mut first_line = true;
-    let n = data.len();
-    for (i, v) in data.iter().enumerate() {
-        let mut tok = format_f64(*v);
-        if i + 1 < n {
-            tok.push(',');
-        }
-        // OpenCV wraps lines at about 70 characters.
-        if line.len() + tok.len() + 1 > 72 && !line.trim_end().ends_with('[') {
-            let _ = writeln!(out, "{}", line.trim_end());
-            line = String::from("       ");
-            first_line = false;
-        }
-        line.push_str(&tok);
-        line.push(' ');
-    }
-    let _ = first_line;
-    line.push(']');
-    let _ = writeln!(out, "{line}");
+    let tokens: Vec<String> = data.iter().map(|v| format_f64(*v)).collect();
+    let lines: Vec<String> = tokens.chunks(4).map(|c| c.join(", ")).collect();
+    let _ = writeln!(out, "   data: [ {} ]", lines.join(",\n       "));
 }
 
 #[cfg(test)]
