@@ -1,6 +1,6 @@
 //! Fixed-point bilinear remap through a lookup table: the undistort-rectify
-//! step of the pipeline in a form the device runs (DESIGN.md "Input": frames
-//! are raw, the rectification maps are built on the host).
+//! preprocessing of paper Section IV.A in a form the device runs (DESIGN.md
+//! "Input": frames are raw, the rectification maps are built on the host).
 //!
 //! The table is OpenCV's `CV_16SC2` + `CV_16UC1` map representation with
 //! `INTER_BITS = 5`: per output pixel an integer source coordinate

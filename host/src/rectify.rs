@@ -1,5 +1,11 @@
 //! Bouguet stereo rectification, undistort-rectify maps and point mapping.
 //!
+//! Paper Section IV.A: before stereo matching every frame pair is
+//! undistorted and rectified, so that corresponding epipolar lines are
+//! horizontal and at the same height (and an object has the same height in
+//! both views). A vertical rig is rectified too (`vertical`): its epipolar
+//! lines are then columns.
+//!
 //! [`stereo_rectify`] equals OpenCV's `cv2.stereoRectify(M1, D1, M2, D2,
 //! (w, h), R, T, flags=CALIB_ZERO_DISPARITY, alpha=0)` step for step
 //! (OpenCV 5 `stereo_geom.cpp` / 4.x `cvStereoRectify`): each camera is

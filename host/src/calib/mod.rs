@@ -1,4 +1,5 @@
-//! Stereo calibration: one in-memory model read from every layout FishTrack
+//! Stereo calibration (paper Sections IV.A and IV.D: rectification before
+//! stereo matching, triangulation for the 3-D length): one in-memory model read from every layout FishTrack
 //! accepts (DESIGN.md "Input: a haul directory"):
 //!
 //! - `calibration.yml`: OpenCV FileStorage YAML with `M1 D1 M2 D2 R T`
