@@ -8,6 +8,10 @@
 
 pub mod calib;
 pub mod error;
+pub mod eval;
+pub mod haul;
+pub mod output;
+pub mod params_file;
 pub mod rectify;
 pub mod truth;
 

@@ -106,7 +106,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Demo { .. } => not_built("demo"),
         Command::Synth { .. } => not_built("synth"),
         Command::Track { .. } => not_built("track"),
-        Command::Eval { .. } => not_built("eval"),
+        Command::Eval { haul, out, json } => {
+            let report = fishtrack::eval::evaluate(&haul, &out)?;
+            if json {
+                println!("{}", report.json());
+            } else {
+                print!("{}", report.table());
+            }
+            Ok(())
+        }
         Command::Compare { .. } => not_built("compare"),
         Command::Bench { .. } => not_built("bench"),
         Command::TimingCheck { .. } => not_built("timing-check"),

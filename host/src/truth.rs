@@ -74,6 +74,13 @@ pub struct TruthFrame {
     pub head_mm: [f64; 3],
     /// Tail-tip point, mm, left camera frame.
     pub tail_mm: [f64; 3],
+    /// Snout point projected into the raw (distorted) left image, pixels;
+    /// optional (`eval` uses it for the single-camera pixel length).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head_px_left: Option<[f64; 2]>,
+    /// Tail-tip point projected into the raw left image, pixels; optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tail_px_left: Option<[f64; 2]>,
 }
 
 impl Truth {

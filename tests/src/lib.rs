@@ -1,9 +1,20 @@
 //! Shared helpers for FishTrack's cross-crate integration tests.
+//!
+//! The binaries belong to other packages (`fishtrack`,
+//! `fishtrack-firmware-sim`), so cargo neither builds them for these tests
+//! nor sets `CARGO_BIN_EXE_*` here (bins are only built for integration tests
+//! of their own package). [`built_bin`] therefore runs `cargo build -p PKG
+//! --bin NAME` once per binary, for the profile these tests were built with
+//! (cargo has released its build lock by the time tests run; up to date, this
+//! is a no-op), so the tests never run a stale binary.
 #![deny(missing_docs)]
 
-use std::path::PathBuf;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Mutex, OnceLock};
 
-/// Path of a workspace binary built by cargo for the integration tests.
+/// Path where cargo puts a workspace binary for the profile of this test.
 pub fn bin(name: &str) -> PathBuf {
     let mut p = std::env::current_exe().expect("test executable path");
     p.pop();
@@ -11,4 +22,51 @@ pub fn bin(name: &str) -> PathBuf {
         p.pop();
     }
     p.join(format!("{name}{}", std::env::consts::EXE_SUFFIX))
+}
+
+/// Path of an up-to-date binary `name` of package `package`, built on first
+/// use; panics with a clear message if it cannot be built.
+pub fn built_bin(package: &str, name: &str) -> &'static Path {
+    static BUILT: OnceLock<Mutex<HashMap<String, &'static Path>>> = OnceLock::new();
+    let mut map = BUILT
+        .get_or_init(|| Mutex::new(HashMap::new()))
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = map.get(name) {
+        return p;
+    }
+    let path = bin(name);
+    let profile_dir = path.parent().expect("binary has a parent directory");
+    let target_dir = profile_dir.parent().expect("profile dir has a parent");
+    let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") | None => "dev".to_string(),
+        Some(other) => other.to_string(),
+    };
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
+    let status = Command::new(&cargo)
+        .args([
+            "build",
+            "--quiet",
+            "--locked",
+            "-p",
+            package,
+            "--bin",
+            name,
+            "--profile",
+            &profile,
+        ])
+        .arg("--manifest-path")
+        .arg(&manifest)
+        .arg("--target-dir")
+        .arg(target_dir)
+        .status();
+    assert!(
+        matches!(status, Ok(s) if s.success()) && path.is_file(),
+        "could not build {name} at {} (cargo: {status:?}); try `cargo build -p {package} --profile {profile}`",
+        path.display()
+    );
+    let leaked: &'static Path = Box::leak(path.into_boxed_path());
+    map.insert(name.to_string(), leaked);
+    leaked
 }

@@ -1,0 +1,146 @@
+//! The `fishtrack` command line as a user sees it (DESIGN.md, "Command
+//! line"): the subcommands it lists, and exit code 2 with a message naming
+//! the subcommand or file for bad input and for subcommands not built yet.
+//!
+//! The binary belongs to another package (`fishtrack`), so cargo neither
+//! builds it for these tests nor sets `CARGO_BIN_EXE_fishtrack` here (bins
+//! are only built for integration tests of their own package). [`fishtrack`]
+//! therefore runs `cargo build -p fishtrack --bin fishtrack` once, for the
+//! profile these tests were built with (cargo has released its build lock by
+//! the time tests run; up to date, this is a no-op), so the tests never run a
+//! stale binary, and fails with a clear message if the binary is still
+//! missing.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// The subcommands DESIGN.md promises.
+const SUBCOMMANDS: [&str; 7] = [
+    "demo",
+    "synth",
+    "track",
+    "eval",
+    "compare",
+    "bench",
+    "timing-check",
+];
+
+fn fishtrack() -> &'static Path {
+    fishtrack_tests::built_bin("fishtrack", "fishtrack")
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(fishtrack())
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", fishtrack().display()))
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn help_lists_the_design_subcommands() {
+    let out = run(&["--help"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let help = text(&out.stdout);
+    // clap prints "Commands:" then one "  name  about" line per subcommand.
+    let listed: Vec<&str> = help
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    for sub in SUBCOMMANDS {
+        assert!(listed.contains(&sub), "`{sub}` missing from:\n{help}");
+    }
+    // Each subcommand has its own help.
+    for sub in SUBCOMMANDS {
+        let out = run(&[sub, "--help"]);
+        assert_eq!(out.status.code(), Some(0), "{sub} --help");
+        assert!(text(&out.stdout).contains("Usage:"), "{sub} --help");
+    }
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let out = run(&["no-such-subcommand"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("no-such-subcommand"));
+    let out = run(&["track"]); // HAUL and --out are required
+    assert_eq!(out.status.code(), Some(2));
+    let out = run(&[]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+/// Every haul-reading subcommand, given a haul directory that does not
+/// exist, exits 2: either "not built yet" naming the subcommand, or a
+/// bad-input error naming the missing directory.
+#[test]
+fn bad_haul_or_unbuilt_subcommand_exits_2() {
+    let t = tempfile::tempdir().unwrap();
+    let missing = t.path().join("no-such-haul");
+    let m = missing.to_str().unwrap();
+    let out_dir = t.path().join("out");
+    let o = out_dir.to_str().unwrap();
+    let mut unbuilt = 0;
+    for (sub, args) in [
+        ("track", vec!["track", m, "--out", o]),
+        ("eval", vec!["eval", m, o]),
+        ("compare", vec!["compare", m]),
+        ("bench", vec!["bench", m]),
+    ] {
+        let out = run(&args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        if err.contains("not built yet") {
+            unbuilt += 1;
+            assert!(err.contains(&format!("fishtrack {sub}")), "{err}");
+        } else {
+            assert!(
+                err.contains("no-such-haul"),
+                "{args:?} must name the haul: {err}"
+            );
+        }
+    }
+    eprintln!("{unbuilt} of 4 haul subcommands are not built yet");
+}
+
+/// Subcommands whose valid-input run does real work are only checked while
+/// they are still unbuilt: then they must exit 2 saying so. (`demo` is not
+/// run at all: built, it synthesises and tracks a whole haul.)
+#[test]
+fn unbuilt_subcommands_say_so() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path().join("haul");
+    let port = t.path().join("no-such-tty");
+    for (sub, args) in [
+        (
+            "synth",
+            vec![
+                "synth",
+                dir.to_str().unwrap(),
+                "--frames",
+                "1",
+                "--size",
+                "64",
+            ],
+        ),
+        (
+            "timing-check",
+            vec!["timing-check", "--port", port.to_str().unwrap()],
+        ),
+    ] {
+        let out = run(&args);
+        let err = text(&out.stderr);
+        if err.contains("not built yet") {
+            assert_eq!(out.status.code(), Some(2), "{sub}: {err}");
+            assert!(err.contains(&format!("fishtrack {sub}")), "{err}");
+        } else if sub == "timing-check" {
+            assert_ne!(out.status.code(), Some(0), "no such port: {err}");
+            assert!(err.contains("no-such-tty"), "must name the port: {err}");
+        }
+    }
+}
