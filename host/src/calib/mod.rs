@@ -40,6 +40,9 @@ pub const ROTATION_TOL: f64 = 1e-6;
 /// Smallest accepted baseline `‖T‖` in millimetres.
 pub const MIN_BASELINE_MM: f64 = 1e-6;
 
+/// Largest image side: the core's remap tables hold `i16` coordinates.
+pub const MAX_IMAGE_SIDE: u32 = i16::MAX as u32;
+
 /// A calibrated stereo pair (OpenCV `stereoCalibrate` conventions).
 #[derive(Debug, Clone, PartialEq)]
 pub struct StereoCalib {
@@ -374,9 +377,9 @@ impl Item {
 
     fn positive_int(&self) -> Result<u32, InputError> {
         let v = self.data.first().copied().unwrap_or(f64::NAN);
-        if self.data.len() != 1 || !(v >= 1.0 && v <= u32::MAX as f64 && v.fract() == 0.0) {
+        if self.data.len() != 1 || !(v >= 1.0 && v <= MAX_IMAGE_SIDE as f64 && v.fract() == 0.0) {
             return Err(self.err(format!(
-                "must be a positive whole number of pixels, found {v}"
+                "must be a positive whole number of pixels up to {MAX_IMAGE_SIDE}, found {v}"
             )));
         }
         Ok(v as u32)
@@ -439,7 +442,13 @@ fn build(parts: Parts, frame_size: Option<(u32, u32)>) -> Result<StereoCalib, In
     let (width, height) = match &parts.size {
         Some((w, h)) => (w.positive_int()?, h.positive_int()?),
         None => match frame_size {
-            Some((w, h)) if w > 0 && h > 0 => (w, h),
+            Some((w, h)) if w > 0 && h > 0 && w <= MAX_IMAGE_SIDE && h <= MAX_IMAGE_SIDE => (w, h),
+            Some((w, h)) if w > 0 && h > 0 => {
+                return Err(InputError::plain(
+                    format!("frame size {w}x{h}"),
+                    format!("larger than the {MAX_IMAGE_SIDE}-pixel sides FishTrack supports"),
+                ))
+            }
             _ => {
                 return Err(InputError::key(
                     &parts.m1.file,
@@ -574,5 +583,8 @@ mod tests {
         let mut c = sample();
         c.width = 0;
         check(&c, "image_width", "positive");
+        let mut c = sample();
+        c.height = 40000;
+        check(&c, "image_height", "up to 32767");
     }
 }

@@ -59,7 +59,7 @@ pub fn parse_npy(path: &Path, key: &str, bytes: &[u8]) -> Result<Array, InputErr
     let descr = header_field(&header, "descr")
         .and_then(|r| {
             let q = r.chars().next()?;
-            let body = &r[1..];
+            let body = &r[q.len_utf8()..];
             body.find(q).map(|e| &body[..e])
         })
         .ok_or_else(|| err("the .npy header has no 'descr'".into()))?;
@@ -103,13 +103,18 @@ pub fn parse_npy(path: &Path, key: &str, bytes: &[u8]) -> Result<Array, InputErr
             "dtype `{descr}` is not supported (float64, float32, int64, int32 are)"
         )));
     }
-    let count: usize = shape.iter().product();
+    let count = shape
+        .iter()
+        .try_fold(1usize, |a, &n| a.checked_mul(n))
+        .ok_or_else(|| err(format!("shape `({shape_txt})` is too large")))?;
+    let needed = count
+        .checked_mul(size)
+        .ok_or_else(|| err(format!("shape `({shape_txt})` is too large")))?;
     let payload = &bytes[hstart + hlen..];
-    if payload.len() < count * size {
+    if payload.len() < needed {
         return Err(err(format!(
-            "array data is truncated: {} bytes, {} needed",
-            payload.len(),
-            count * size
+            "array data is truncated: {} bytes, {needed} needed",
+            payload.len()
         )));
     }
     let mut flat = Vec::with_capacity(count);
@@ -221,6 +226,19 @@ mod tests {
         assert_eq!(b.data, vec![1.5, -2.0]);
     }
 
+    proptest::proptest! {
+        #[test]
+        fn never_panics_on_garbage(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..200),
+                                   header in "\\PC{0,80}") {
+            let _ = parse_npy(Path::new("g.npz"), "X", &bytes);
+            let mut v = b"\x93NUMPY\x01\x00".to_vec();
+            v.extend_from_slice(&(header.len() as u16).to_le_bytes());
+            v.extend_from_slice(header.as_bytes());
+            v.extend_from_slice(&bytes);
+            let _ = parse_npy(Path::new("g.npz"), "X", &v);
+        }
+    }
+
     #[test]
     fn rejects_truncated_and_odd_arrays() {
         let vals: Vec<u8> = (1..=5).flat_map(|i| (i as f64).to_le_bytes()).collect();
@@ -240,5 +258,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("magic"), "{e}");
+        let e = parse_npy(
+            Path::new("c.npz"),
+            "R",
+            &npy("<f8", false, "(99999999999, 99999999999)", &[]),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("too large"), "{e}");
     }
 }

@@ -347,6 +347,13 @@ mod tests {
         assert_eq!(m["image_width"], Node::Number(320.0));
     }
 
+    proptest::proptest! {
+        #[test]
+        fn never_panics_on_garbage(body in "(\\PC|\n| |:|\\[|\\]|,|!!opencv-matrix|rows: |cols: |data: ){0,120}") {
+            let _ = parse(Path::new("g.yml"), &format!("%YAML:1.0\n{body}"));
+        }
+    }
+
     #[test]
     fn rejects_bad_text_naming_the_key() {
         let bad = "%YAML:1.0\nM1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 1, 2, 3 ]\n";
