@@ -28,6 +28,7 @@ pub mod link;
 pub mod object;
 pub mod params;
 pub mod refine;
+pub mod remap;
 pub mod snake;
 pub mod stereo;
 pub mod strobe;

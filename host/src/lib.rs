@@ -6,11 +6,13 @@
 //! live in `fishtrack-core`; this crate feeds them and checks them.
 #![deny(missing_docs)]
 
+pub mod calib;
 pub mod error;
 pub mod eval;
 pub mod haul;
 pub mod output;
 pub mod params_file;
+pub mod rectify;
 pub mod reference;
 pub mod reference_stereo;
 pub mod reference_track;

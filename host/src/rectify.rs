@@ -1,0 +1,695 @@
+//! Bouguet stereo rectification, undistort-rectify maps and point mapping.
+//!
+//! Paper Section IV.A: before stereo matching every frame pair is
+//! undistorted and rectified, so that corresponding epipolar lines are
+//! horizontal and at the same height (and an object has the same height in
+//! both views). A vertical rig is rectified too (`vertical`): its epipolar
+//! lines are then columns.
+//!
+//! [`stereo_rectify`] equals OpenCV's `cv2.stereoRectify(M1, D1, M2, D2,
+//! (w, h), R, T, flags=CALIB_ZERO_DISPARITY, alpha=0)` step for step
+//! (OpenCV 5 `stereo_geom.cpp` / 4.x `cvStereoRectify`): each camera is
+//! rotated half-way (`r_r = Rodrigues(−½·Rodrigues(R))`), then both by the
+//! rotation taking the baseline onto the x axis (horizontal pair) or the y
+//! axis (vertical pair); the new focal length is the mean of the two
+//! cameras' focal lengths across the baseline, the principal point centres
+//! the undistorted image corners, and `alpha = 0` scales so that only valid
+//! pixels remain (the inner rectangle of the undistorted image border,
+//! OpenCV's `getUndistortRectangles`). OpenCV's own precision is kept where
+//! it shows in the results: its 5-iteration undistortion and the `float`
+//! points used for the principal point.
+//!
+//! The maps follow `cv2.initUndistortRectifyMap`: rectified pixel →
+//! `(P[:, :3]·Rᵢ)⁻¹` → normalized ray → distortion → raw pixel. Raw →
+//! rectified ([`RectifiedCamera::raw_to_rect`]) inverts the distortion
+//! iteratively to 1e-14 (not OpenCV's 5 fixed-point steps); rectified → raw
+//! is closed form. FishTrack reports boxes in raw left pixels (DESIGN.md
+//! "Output"), hence [`RectifiedCamera::rect_box_to_raw`].
+//!
+//! [`Rectifier`] applies the maps to frame pairs through the core's
+//! fixed-point remap ([`fishtrack_core::remap`]), the form the device runs.
+
+use image::GrayImage;
+use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3};
+
+use fishtrack_core::remap::{self, RemapError, RemapTable};
+use fishtrack_core::{ImageView, ImageViewMut};
+
+use crate::calib::StereoCalib;
+
+/// Distortion coefficients padded to the rational model:
+/// `k1 k2 p1 p2 k3 k4 k5 k6`.
+pub type Dist8 = [f64; 8];
+
+/// Applies the lens distortion to a normalized point (OpenCV model).
+pub fn distort(k: &Dist8, x: f64, y: f64) -> (f64, f64) {
+    let [k1, k2, p1, p2, k3, k4, k5, k6] = *k;
+    let x2 = x * x;
+    let y2 = y * y;
+    let r2 = x2 + y2;
+    let xy2 = 2.0 * x * y;
+    let kr = (1.0 + ((k3 * r2 + k2) * r2 + k1) * r2) / (1.0 + ((k6 * r2 + k5) * r2 + k4) * r2);
+    (
+        x * kr + p1 * xy2 + p2 * (r2 + 2.0 * x2),
+        y * kr + p1 * (r2 + 2.0 * y2) + p2 * xy2,
+    )
+}
+
+/// OpenCV's fixed-point undistortion (`undistortPoints` with
+/// `TermCriteria(COUNT, iters)`): kept to reproduce `stereoRectify`.
+pub fn undistort_opencv(k: &Dist8, xd: f64, yd: f64, iters: usize) -> (f64, f64) {
+    let (mut x, mut y) = (xd, yd);
+    for _ in 0..iters {
+        let r2 = x * x + y * y;
+        let icdist = (1.0 + ((k[7] * r2 + k[6]) * r2 + k[5]) * r2)
+            / (1.0 + ((k[4] * r2 + k[1]) * r2 + k[0]) * r2);
+        if icdist < 0.0 {
+            return (xd, yd);
+        }
+        let dx = 2.0 * k[2] * x * y + k[3] * (r2 + 2.0 * x * x);
+        let dy = k[2] * (r2 + 2.0 * y * y) + 2.0 * k[3] * x * y;
+        x = (xd - dx) * icdist;
+        y = (yd - dy) * icdist;
+    }
+    (x, y)
+}
+
+/// Tight undistortion of a normalized point: fixed-point start, then Newton
+/// steps until the distortion reproduces `(xd, yd)` to 1e-14. `None` when
+/// it does not converge (a point outside the lens model's valid region).
+pub fn undistort_exact(k: &Dist8, xd: f64, yd: f64) -> Option<(f64, f64)> {
+    let (mut x, mut y) = undistort_opencv(k, xd, yd, 20);
+    for _ in 0..100 {
+        let (fx, fy) = distort(k, x, y);
+        let (ex, ey) = (fx - xd, fy - yd);
+        if ex.abs().max(ey.abs()) < 1e-14 {
+            return Some((x, y));
+        }
+        let h = 1e-7;
+        let (ax, ay) = distort(k, x + h, y);
+        let (bx, by) = distort(k, x - h, y);
+        let (cx, cy) = distort(k, x, y + h);
+        let (dx, dy) = distort(k, x, y - h);
+        let j = [
+            (ax - bx) / (2.0 * h),
+            (cx - dx) / (2.0 * h),
+            (ay - by) / (2.0 * h),
+            (cy - dy) / (2.0 * h),
+        ];
+        let det = j[0] * j[3] - j[1] * j[2];
+        if !det.is_finite() || det.abs() < 1e-12 {
+            return None;
+        }
+        x -= (j[3] * ex - j[1] * ey) / det;
+        y -= (-j[2] * ex + j[0] * ey) / det;
+        if !x.is_finite() || !y.is_finite() {
+            return None;
+        }
+    }
+    let (fx, fy) = distort(k, x, y);
+    ((fx - xd).abs().max((fy - yd).abs()) < 1e-9).then_some((x, y))
+}
+
+/// Rotation vector → matrix (OpenCV `Rodrigues`).
+pub fn rodrigues_vec_to_mat(r: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = r.norm();
+    if theta < f64::EPSILON {
+        return Matrix3::identity();
+    }
+    let (s, c) = theta.sin_cos();
+    let c1 = 1.0 - c;
+    let n = r / theta;
+    let rrt = n * n.transpose();
+    let rx = Matrix3::new(0.0, -n.z, n.y, n.z, 0.0, -n.x, -n.y, n.x, 0.0);
+    Matrix3::identity() * c + rrt * c1 + rx * s
+}
+
+/// Rotation matrix → vector (OpenCV `Rodrigues`: the matrix is first made
+/// orthonormal through its SVD, `R ← U·Vᵀ`).
+pub fn rodrigues_mat_to_vec(m: &Matrix3<f64>) -> Vector3<f64> {
+    let svd = m.svd(true, true);
+    let r = match (svd.u, svd.v_t) {
+        (Some(u), Some(vt)) => u * vt,
+        _ => *m,
+    };
+    let mut v = Vector3::new(
+        r[(2, 1)] - r[(1, 2)],
+        r[(0, 2)] - r[(2, 0)],
+        r[(1, 0)] - r[(0, 1)],
+    );
+    let s = ((v.x * v.x + v.y * v.y + v.z * v.z) * 0.25).sqrt();
+    let c = ((r[(0, 0)] + r[(1, 1)] + r[(2, 2)] - 1.0) * 0.5).clamp(-1.0, 1.0);
+    let theta = c.acos();
+    if s < 1e-5 {
+        if c > 0.0 {
+            return Vector3::zeros();
+        }
+        let t = (r[(0, 0)] + 1.0) * 0.5;
+        v.x = t.max(0.0).sqrt();
+        let t = (r[(1, 1)] + 1.0) * 0.5;
+        v.y = t.max(0.0).sqrt() * if r[(0, 1)] < 0.0 { -1.0 } else { 1.0 };
+        let t = (r[(2, 2)] + 1.0) * 0.5;
+        v.z = t.max(0.0).sqrt() * if r[(0, 2)] < 0.0 { -1.0 } else { 1.0 };
+        if v.x.abs() < v.y.abs() && v.x.abs() < v.z.abs() && (r[(1, 2)] > 0.0) != (v.y * v.z > 0.0)
+        {
+            v.z = -v.z;
+        }
+        let n = v.norm();
+        return v * (theta / n);
+    }
+    v * (theta / (2.0 * s))
+}
+
+/// Result of [`stereo_rectify`]: OpenCV's `R1 R2 P1 P2 Q`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rectification {
+    /// Rotation of the left camera into the rectified frame.
+    pub r1: Matrix3<f64>,
+    /// Rotation of the right camera into the rectified frame.
+    pub r2: Matrix3<f64>,
+    /// Left rectified projection `[f 0 cx 0; 0 f cy 0; 0 0 1 0]`.
+    pub p1: Matrix3x4<f64>,
+    /// Right rectified projection (baseline·f in column 3, row 0 or 1).
+    pub p2: Matrix3x4<f64>,
+    /// Disparity-to-depth matrix.
+    pub q: Matrix4<f64>,
+    /// True when the baseline is vertical (OpenCV `idx == 1`): disparity
+    /// is then along y.
+    pub vertical: bool,
+}
+
+/// OpenCV's `getUndistortRectangles`: the border points of a 9×9 grid over
+/// the raw image, corners included (this is what the OpenCV 5.0.0 wheel
+/// computes; some OpenCV sources skip the corners, which changes `alpha = 0`
+/// results whenever a corner bounds the inner rectangle; the interior grid
+/// points cannot change it), undistorted with 5 iterations and mapped by
+/// `P[:, :3]·R`. Returns the inner and outer rectangles as `(x, y, w, h)`.
+fn undistort_rectangles(
+    m: &Matrix3<f64>,
+    k: &Dist8,
+    r: &Matrix3<f64>,
+    p: &Matrix3x4<f64>,
+    w: u32,
+    h: u32,
+) -> ([f64; 4], [f64; 4]) {
+    const N: usize = 9;
+    let rr = p.fixed_view::<3, 3>(0, 0) * r;
+    let step_x = (w as f64 - 1.0) / (N - 1) as f64;
+    let step_y = (h as f64 - 1.0) / (N - 1) as f64;
+    let (fx, fy, cx, cy) = (m[(0, 0)], m[(1, 1)], m[(0, 2)], m[(1, 2)]);
+    let (ifx, ify) = (1.0 / fx, 1.0 / fy);
+    let (mut ix0, mut ix1, mut iy0, mut iy1) = (
+        -f32::MAX as f64,
+        f32::MAX as f64,
+        -f32::MAX as f64,
+        f32::MAX as f64,
+    );
+    let (mut ox0, mut ox1, mut oy0, mut oy1) = (
+        f32::MAX as f64,
+        -f32::MAX as f64,
+        f32::MAX as f64,
+        -f32::MAX as f64,
+    );
+    for yi in 0..N {
+        for xi in 0..N {
+            let border = xi == 0 || xi == N - 1 || yi == 0 || yi == N - 1;
+            if !border {
+                continue;
+            }
+            let (u, v) = (xi as f64 * step_x, yi as f64 * step_y);
+            let (x, y) = undistort_opencv(k, (u - cx) * ifx, (v - cy) * ify, 5);
+            let xx = rr[(0, 0)] * x + rr[(0, 1)] * y + rr[(0, 2)];
+            let yy = rr[(1, 0)] * x + rr[(1, 1)] * y + rr[(1, 2)];
+            let ww = 1.0 / (rr[(2, 0)] * x + rr[(2, 1)] * y + rr[(2, 2)]);
+            let (px, py) = (xx * ww, yy * ww);
+            ox0 = ox0.min(px);
+            ox1 = ox1.max(px);
+            oy0 = oy0.min(py);
+            oy1 = oy1.max(py);
+            if xi == 0 {
+                ix0 = ix0.max(px);
+            }
+            if xi == N - 1 {
+                ix1 = ix1.min(px);
+            }
+            if yi == 0 {
+                iy0 = iy0.max(py);
+            }
+            if yi == N - 1 {
+                iy1 = iy1.min(py);
+            }
+        }
+    }
+    (
+        [ix0, iy0, ix1 - ix0, iy1 - iy0],
+        [ox0, oy0, ox1 - ox0, oy1 - oy0],
+    )
+}
+
+/// Bouguet rectification, equal to OpenCV `stereoRectify` with
+/// `flags = CALIB_ZERO_DISPARITY`, `alpha = 0`, `newImageSize = imageSize`.
+pub fn stereo_rectify(c: &StereoCalib) -> Rectification {
+    let k1 = StereoCalib::dist8(&c.d1);
+    let k2 = StereoCalib::dist8(&c.d2);
+    let (nx, ny) = (c.width as f64, c.height as f64);
+
+    let om = rodrigues_mat_to_vec(&c.r) * -0.5;
+    let r_r = rodrigues_vec_to_mat(&om);
+    let t = r_r * c.t;
+    let idx = if t.x.abs() > t.y.abs() { 0 } else { 1 };
+    let cc = t[idx];
+    let nt = t.norm();
+    let mut uu = Vector3::zeros();
+    uu[idx] = if cc > 0.0 { 1.0 } else { -1.0 };
+    let mut ww = t.cross(&uu);
+    let nw = ww.norm();
+    if nw > 0.0 {
+        ww *= (cc.abs() / nt).acos() / nw;
+    }
+    let w_r = rodrigues_vec_to_mat(&ww);
+    let r1 = w_r * r_r.transpose();
+    let r2 = w_r * r_r;
+    let t = r2 * c.t;
+
+    let j = idx ^ 1;
+    let mut fc_new = (c.m1[(j, j)] + c.m2[(j, j)]) * 0.5;
+
+    // principal points: mean of the projected undistorted image corners
+    let mut cc_new = [(0.0f64, 0.0f64); 2];
+    for (kk, (m, d, r)) in [(&c.m1, &k1, &r1), (&c.m2, &k2, &r2)]
+        .into_iter()
+        .enumerate()
+    {
+        let (fx, fy, cx, cy) = (m[(0, 0)], m[(1, 1)], m[(0, 2)], m[(1, 2)]);
+        let mut sum = (0.0f64, 0.0f64);
+        for i in 0..4 {
+            let u = ((i % 2) as f64 * (nx - 1.0)) as f32 as f64;
+            let v = ((if i < 2 { 0.0 } else { 1.0 }) * (ny - 1.0)) as f32 as f64;
+            let (x, y) = undistort_opencv(d, (u - cx) * (1.0 / fx), (v - cy) * (1.0 / fy), 5);
+            let p = Vector3::new(x as f32 as f64, y as f32 as f64, 1.0);
+            let q = r * p;
+            let iz = if q.z != 0.0 { 1.0 / q.z } else { 1.0 };
+            let px = (q.x * iz * fc_new) as f32 as f64;
+            let py = (q.y * iz * fc_new) as f32 as f64;
+            sum.0 += px;
+            sum.1 += py;
+        }
+        cc_new[kk] = (
+            (nx - 1.0) / 2.0 - sum.0 / 4.0,
+            (ny - 1.0) / 2.0 - sum.1 / 4.0,
+        );
+    }
+    // CALIB_ZERO_DISPARITY: both principal points the same
+    let ccx = (cc_new[0].0 + cc_new[1].0) * 0.5;
+    let ccy = (cc_new[0].1 + cc_new[1].1) * 0.5;
+    cc_new = [(ccx, ccy), (ccx, ccy)];
+
+    let t_idx = t[idx];
+    let mut p1 = Matrix3x4::zeros();
+    p1[(0, 0)] = fc_new;
+    p1[(1, 1)] = fc_new;
+    p1[(0, 2)] = cc_new[0].0;
+    p1[(1, 2)] = cc_new[0].1;
+    p1[(2, 2)] = 1.0;
+    let mut p2 = p1;
+    p2[(0, 2)] = cc_new[1].0;
+    p2[(1, 2)] = cc_new[1].1;
+    p2[(idx, 3)] = t_idx * fc_new;
+
+    // alpha = 0: scale so that the whole rectified image holds valid pixels
+    let (in1, _) = undistort_rectangles(&c.m1, &k1, &r1, &p1, c.width, c.height);
+    let (in2, _) = undistort_rectangles(&c.m2, &k2, &r2, &p2, c.width, c.height);
+    let (wn, hn) = (nx, ny);
+    let (cx1_0, cy1_0, cx2_0, cy2_0) = (cc_new[0].0, cc_new[0].1, cc_new[1].0, cc_new[1].1);
+    let cx1 = wn * cx1_0 / nx;
+    let cy1 = hn * cy1_0 / ny;
+    let cx2 = wn * cx2_0 / nx;
+    let cy2 = hn * cy2_0 / ny;
+    let s_of = |cx: f64, cy: f64, cx0: f64, cy0: f64, r: &[f64; 4]| {
+        (cx / (cx0 - r[0]))
+            .max(cy / (cy0 - r[1]))
+            .max((wn - 1.0 - cx) / (r[0] + r[2] - cx0))
+            .max((hn - 1.0 - cy) / (r[1] + r[3] - cy0))
+    };
+    let s = s_of(cx2, cy2, cx2_0, cy2_0, &in2).max(s_of(cx1, cy1, cx1_0, cy1_0, &in1));
+
+    fc_new *= s;
+    p2[(0, 0)] = fc_new;
+    p2[(1, 1)] = fc_new;
+    p2[(0, 2)] = cx2;
+    p2[(1, 2)] = cy2;
+    p2[(idx, 3)] *= s;
+    p1[(0, 0)] = fc_new;
+    p1[(1, 1)] = fc_new;
+    p1[(0, 2)] = cx1;
+    p1[(1, 2)] = cy1;
+    p1[(idx, 3)] = 0.0;
+
+    let dcc = if idx == 0 { cx1 - cx2 } else { cy1 - cy2 };
+    let q = Matrix4::new(
+        1.0,
+        0.0,
+        0.0,
+        -cx1,
+        0.0,
+        1.0,
+        0.0,
+        -cy1,
+        0.0,
+        0.0,
+        0.0,
+        fc_new,
+        0.0,
+        0.0,
+        -1.0 / t_idx,
+        dcc / t_idx,
+    );
+    Rectification {
+        r1,
+        r2,
+        p1,
+        p2,
+        q,
+        vertical: idx == 1,
+    }
+}
+
+/// One camera of a rectified pair: what maps its raw pixels to rectified
+/// pixels and back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RectifiedCamera {
+    /// Raw camera matrix.
+    pub m: Matrix3<f64>,
+    /// Distortion, padded to 8 coefficients.
+    pub k: Dist8,
+    /// Rectifying rotation (`R1` or `R2`).
+    pub r: Matrix3<f64>,
+    /// Rectified projection (`P1` or `P2`).
+    pub p: Matrix3x4<f64>,
+    /// `(P[:, :3]·R)⁻¹`: rectified pixel → normalized ray of the raw camera.
+    pub ir: Matrix3<f64>,
+    /// Image width (raw and rectified).
+    pub width: u32,
+    /// Image height (raw and rectified).
+    pub height: u32,
+}
+
+/// Float undistort-rectify maps (`cv2.initUndistortRectifyMap`, `CV_32FC1`):
+/// rectified pixel `(x, y)` samples the raw image at
+/// `(map_x[y·w + x], map_y[y·w + x])`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RectifyMap {
+    /// Width of the rectified image.
+    pub width: u32,
+    /// Height of the rectified image.
+    pub height: u32,
+    /// Raw x per rectified pixel, row-major.
+    pub map_x: Vec<f32>,
+    /// Raw y per rectified pixel, row-major.
+    pub map_y: Vec<f32>,
+}
+
+impl RectifiedCamera {
+    /// The camera from its raw model and rectification.
+    pub fn new(
+        m: Matrix3<f64>,
+        d: &[f64],
+        r: Matrix3<f64>,
+        p: Matrix3x4<f64>,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        let a = p.fixed_view::<3, 3>(0, 0) * r;
+        let ir = a.try_inverse().unwrap_or_else(Matrix3::zeros);
+        RectifiedCamera {
+            m,
+            k: StereoCalib::dist8(d),
+            r,
+            p,
+            ir,
+            width,
+            height,
+        }
+    }
+
+    /// Left and right cameras of a calibration and its rectification.
+    pub fn pair(c: &StereoCalib, rect: &Rectification) -> (Self, Self) {
+        (
+            Self::new(c.m1, &c.d1, rect.r1, rect.p1, c.width, c.height),
+            Self::new(c.m2, &c.d2, rect.r2, rect.p2, c.width, c.height),
+        )
+    }
+
+    /// Rectified pixel → raw pixel (closed form, as the remap maps).
+    pub fn rect_to_raw(&self, u: f64, v: f64) -> (f64, f64) {
+        let ir = &self.ir;
+        let x = ir[(0, 0)] * u + ir[(0, 1)] * v + ir[(0, 2)];
+        let y = ir[(1, 0)] * u + ir[(1, 1)] * v + ir[(1, 2)];
+        let w = ir[(2, 0)] * u + ir[(2, 1)] * v + ir[(2, 2)];
+        let (xd, yd) = distort(&self.k, x / w, y / w);
+        (
+            self.m[(0, 0)] * xd + self.m[(0, 2)],
+            self.m[(1, 1)] * yd + self.m[(1, 2)],
+        )
+    }
+
+    /// Raw pixel → rectified pixel, the distortion inverted to 1e-14
+    /// (normalized units). `None` when the inversion does not converge.
+    pub fn raw_to_rect(&self, u: f64, v: f64) -> Option<(f64, f64)> {
+        let xd = (u - self.m[(0, 2)]) / self.m[(0, 0)];
+        let yd = (v - self.m[(1, 2)]) / self.m[(1, 1)];
+        let (x, y) = undistort_exact(&self.k, xd, yd)?;
+        let a = self.p.fixed_view::<3, 3>(0, 0) * self.r;
+        let q = a * Vector3::new(x, y, 1.0);
+        Some((q.x / q.z, q.y / q.z))
+    }
+
+    /// A rectified box `[x0, x1] × [y0, y1]` (pixel coordinates) → the
+    /// upright box holding its outline in the raw image, found by mapping
+    /// outline points at most a pixel apart. Returns `(x0, y0, x1, y1)`.
+    pub fn rect_box_to_raw(&self, x0: f64, y0: f64, x1: f64, y1: f64) -> (f64, f64, f64, f64) {
+        let (x0, x1) = (x0.min(x1), x0.max(x1));
+        let (y0, y1) = (y0.min(y1), y0.max(y1));
+        let nx = ((x1 - x0).ceil() as usize).clamp(1, 1 << 16);
+        let ny = ((y1 - y0).ceil() as usize).clamp(1, 1 << 16);
+        let mut b = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        );
+        let mut add = |u: f64, v: f64| {
+            let (x, y) = self.rect_to_raw(u, v);
+            b = (b.0.min(x), b.1.min(y), b.2.max(x), b.3.max(y));
+        };
+        for i in 0..=nx {
+            let u = x0 + (x1 - x0) * i as f64 / nx as f64;
+            add(u, y0);
+            add(u, y1);
+        }
+        for i in 0..=ny {
+            let v = y0 + (y1 - y0) * i as f64 / ny as f64;
+            add(x0, v);
+            add(x1, v);
+        }
+        b
+    }
+
+    /// The float maps of `cv2.initUndistortRectifyMap(M, D, R, P, size, CV_32FC1)`.
+    pub fn float_map(&self) -> RectifyMap {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut map_x = Vec::with_capacity(w * h);
+        let mut map_y = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let (u, v) = self.rect_to_raw(x as f64, y as f64);
+                map_x.push(u as f32);
+                map_y.push(v as f32);
+            }
+        }
+        RectifyMap {
+            width: self.width,
+            height: self.height,
+            map_x,
+            map_y,
+        }
+    }
+}
+
+/// Bilinear remap of an 8-bit image through float maps, in `f64`, with
+/// out-of-image neighbours read as 0 (OpenCV `BORDER_CONSTANT`), rounded
+/// to nearest. The host-side yardstick for the core's fixed-point remap.
+pub fn remap_float(src: &GrayImage, map: &RectifyMap) -> GrayImage {
+    let (sw, sh) = (src.width() as i64, src.height() as i64);
+    let px = |x: i64, y: i64| -> f64 {
+        if x >= 0 && y >= 0 && x < sw && y < sh {
+            src.get_pixel(x as u32, y as u32)[0] as f64
+        } else {
+            0.0
+        }
+    };
+    let mut out = GrayImage::new(map.width, map.height);
+    for (i, p) in out.pixels_mut().enumerate() {
+        let (x, y) = (map.map_x[i] as f64, map.map_y[i] as f64);
+        if !x.is_finite() || !y.is_finite() {
+            p[0] = 0;
+            continue;
+        }
+        let (x0, y0) = (x.floor(), y.floor());
+        let (a, b) = (x - x0, y - y0);
+        let (xi, yi) = (x0 as i64, y0 as i64);
+        let v = px(xi, yi) * (1.0 - a) * (1.0 - b)
+            + px(xi + 1, yi) * a * (1.0 - b)
+            + px(xi, yi + 1) * (1.0 - a) * b
+            + px(xi + 1, yi + 1) * a * b;
+        p[0] = v.round().clamp(0.0, 255.0) as u8;
+    }
+    out
+}
+
+/// The core's fixed-point table for a float map (OpenCV `convertMaps` to
+/// `CV_16SC2` + `CV_16UC1`: coordinates rounded to 1/32 pixel, half to even).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FixedMap {
+    /// Width of the rectified image.
+    pub width: u32,
+    /// Height of the rectified image.
+    pub height: u32,
+    /// Integer source `(x, y)` per output pixel, interleaved.
+    pub xy: Vec<i16>,
+    /// `fy·32 + fx` fractions per output pixel.
+    pub frac: Vec<u16>,
+}
+
+impl FixedMap {
+    /// Quantizes float maps.
+    pub fn from_float(map: &RectifyMap) -> Self {
+        let n = map.map_x.len();
+        let mut xy = vec![0i16; 2 * n];
+        let mut frac = vec![0u16; n];
+        let q = |v: f32| -> i32 {
+            let s = (v * remap::INTER_TAB_SIZE as f32) as f64;
+            if s.is_nan() {
+                i32::MIN
+            } else {
+                s.round_ties_even().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+            }
+        };
+        for i in 0..n {
+            let (p, f) = remap::pack(q(map.map_x[i]), q(map.map_y[i]));
+            xy[2 * i] = p[0];
+            xy[2 * i + 1] = p[1];
+            frac[i] = f;
+        }
+        FixedMap {
+            width: map.width,
+            height: map.height,
+            xy,
+            frac,
+        }
+    }
+
+    /// The table as the core reads it.
+    pub fn table(&self) -> Result<RemapTable<'_>, RemapError> {
+        RemapTable::new(
+            self.width as usize,
+            self.height as usize,
+            &self.xy,
+            &self.frac,
+        )
+    }
+
+    /// Remaps `src` with the core's fixed-point bilinear remap.
+    pub fn apply(&self, src: &GrayImage) -> Result<GrayImage, RemapError> {
+        let view = ImageView::packed(src.as_raw(), src.width() as usize, src.height() as usize)
+            .map_err(RemapError::Image)?;
+        let mut out = GrayImage::new(self.width, self.height);
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut dst = ImageViewMut::packed(&mut out, w, h).map_err(RemapError::Image)?;
+        remap::remap_bilinear(&view, &self.table()?, &mut dst)?;
+        Ok(out)
+    }
+}
+
+/// Rectifies raw left/right frame pairs of one calibration with the core's
+/// fixed-point remap.
+#[derive(Debug, Clone)]
+pub struct Rectifier {
+    /// The calibration.
+    pub calib: StereoCalib,
+    /// Its rectification.
+    pub rect: Rectification,
+    /// Left camera mapping.
+    pub left: RectifiedCamera,
+    /// Right camera mapping.
+    pub right: RectifiedCamera,
+    /// Left fixed-point table.
+    pub left_map: FixedMap,
+    /// Right fixed-point table.
+    pub right_map: FixedMap,
+}
+
+impl Rectifier {
+    /// Computes the rectification and both remap tables.
+    pub fn new(calib: &StereoCalib) -> Self {
+        let rect = stereo_rectify(calib);
+        let (left, right) = RectifiedCamera::pair(calib, &rect);
+        let left_map = FixedMap::from_float(&left.float_map());
+        let right_map = FixedMap::from_float(&right.float_map());
+        Rectifier {
+            calib: calib.clone(),
+            rect,
+            left,
+            right,
+            left_map,
+            right_map,
+        }
+    }
+
+    /// Rectifies a raw frame pair (each must have the calibration's size).
+    pub fn rectify_pair(
+        &self,
+        left: &GrayImage,
+        right: &GrayImage,
+    ) -> Result<(GrayImage, GrayImage), RemapError> {
+        let size = (self.calib.width, self.calib.height);
+        if left.dimensions() != size || right.dimensions() != size {
+            return Err(RemapError::SizeMismatch);
+        }
+        Ok((self.left_map.apply(left)?, self.right_map.apply(right)?))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rodrigues_round_trips() {
+        for v in [
+            Vector3::new(0.1, -0.2, 0.05),
+            Vector3::new(2e-5, 0.0, 0.0),
+            Vector3::new(0.0, 3.0, 0.1),
+        ] {
+            let m = rodrigues_vec_to_mat(&v);
+            assert!((rodrigues_mat_to_vec(&m) - v).norm() < 1e-9, "{v}");
+        }
+        // like OpenCV, rotations below ~1e-5 rad read back as none
+        let m = rodrigues_vec_to_mat(&Vector3::new(1e-9, 0.0, 0.0));
+        assert_eq!(rodrigues_mat_to_vec(&m), Vector3::zeros());
+        // 180 degrees
+        let v = Vector3::new(0.0, std::f64::consts::PI, 0.0);
+        let back = rodrigues_mat_to_vec(&rodrigues_vec_to_mat(&v));
+        assert!((back.norm() - std::f64::consts::PI).abs() < 1e-9);
+    }
+
+    #[test]
+    fn exact_undistortion_inverts_distortion() {
+        let k = [-0.3, 0.12, 0.0015, -0.0007, -0.02, -0.1, 0.03, 0.002];
+        for &(x, y) in &[(0.0, 0.0), (0.3, -0.2), (-0.5, 0.4), (0.1, 0.6)] {
+            let (xd, yd) = distort(&k, x, y);
+            let (ux, uy) = undistort_exact(&k, xd, yd).unwrap();
+            assert!((ux - x).abs() < 1e-12 && (uy - y).abs() < 1e-12);
+        }
+    }
+}
