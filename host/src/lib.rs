@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod error;
+pub mod synth;
 pub mod truth;
 
 pub use error::InputError;
