@@ -287,3 +287,115 @@ fn nearest_neighbour_on_perfect_detections_fails_as_in_the_paper() {
         );
     }
 }
+
+#[test]
+fn fish_enter_and_leave_across_every_border_in_about_four_frames() {
+    let d = tempfile::tempdir().unwrap();
+    let t = write_haul(d.path(), &cfg(9, 256, 100)).unwrap();
+    let w = t.width as f64;
+    let touches = |b: [f64; 4]| [b[0] <= 0.0, b[1] <= 0.0, b[0] + b[2] >= w, b[1] + b[3] >= w];
+    let mut entries = [0; 4];
+    let mut exits = [0; 4];
+    let mut lives = Vec::new();
+    let mut minus_x = 0;
+    let mut plus_x = 0;
+    for f in &t.fish {
+        let seen: Vec<_> = f.frames.iter().filter_map(|fr| fr.left_box).collect();
+        let (Some(first), Some(last)) = (seen.first(), seen.last()) else {
+            continue;
+        };
+        lives.push(seen.len() as f64);
+        for (k, hit) in touches(*first).iter().enumerate() {
+            entries[k] += usize::from(*hit);
+        }
+        for (k, hit) in touches(*last).iter().enumerate() {
+            exits[k] += usize::from(*hit);
+        }
+        let dx = f.frames.last().unwrap().head_mm[0] - f.frames[0].head_mm[0];
+        if f.frames.len() > 1 {
+            if dx < 0.0 {
+                minus_x += 1;
+            } else {
+                plus_x += 1;
+            }
+        }
+    }
+    // [left, top, right, bottom]
+    assert!(entries.iter().all(|&n| n >= 2), "entries {entries:?}");
+    assert!(exits.iter().all(|&n| n >= 2), "exits {exits:?}");
+    assert!(
+        minus_x > 2 * plus_x && plus_x > 0,
+        "-x {minus_x}, +x {plus_x}"
+    );
+    let life = lives.iter().sum::<f64>() / lives.len() as f64;
+    assert!((2.5..6.0).contains(&life), "mean visible life {life}");
+}
+
+/// An independent re-implementation of the NN-on-truth association and the
+/// eq. 16 success rate, to check `fishtrack::synth::hardness`.
+const NN_PY: &str = r#"
+import json, sys
+t = json.load(open(sys.argv[1]))
+W = t['width']
+area_min = int(2000 * (W / 2048) ** 2) if W != 2048 else 2000
+obs = {}
+for f in t['fish']:
+    for fr in f['frames']:
+        b = fr['left_box']
+        if b and fr['left_area'] >= area_min:
+            obs.setdefault(fr['frame'], []).append((f['id'], (b[0] + b[2] / 2, b[1] + b[3] / 2)))
+def run(gate, alpha, coast):
+    tracks, nid, asg = [], 1, {}
+    for fr in range(1, t['frames'] + 1):
+        here = sorted(obs.get(fr, []))
+        pairs = []
+        for ti, tr in enumerate(tracks):
+            p = (tr['x'][0] + tr['v'][0], tr['x'][1] + tr['v'][1])
+            for oi, (i, c) in enumerate(here):
+                d = ((c[0] - p[0]) ** 2 + (c[1] - p[1]) ** 2) ** .5
+                if d <= gate:
+                    pairs.append((d, ti, oi))
+        pairs.sort()
+        tu, ou = set(), set()
+        for d, ti, oi in pairs:
+            if ti in tu or oi in ou:
+                continue
+            tu.add(ti); ou.add(oi)
+            tr = tracks[ti]; c = here[oi][1]
+            vo = (c[0] - tr['x'][0], c[1] - tr['x'][1])
+            tr['v'] = (alpha * vo[0] + (1 - alpha) * tr['v'][0], alpha * vo[1] + (1 - alpha) * tr['v'][1])
+            tr['x'] = c; tr['m'] = 0
+            asg[(fr, here[oi][0])] = tr['id']
+        for ti, tr in enumerate(tracks):
+            if ti not in tu:
+                tr['x'] = (tr['x'][0] + tr['v'][0], tr['x'][1] + tr['v'][1]); tr['m'] += 1
+        tracks = [tr for tr in tracks if tr['m'] <= coast]
+        for oi, (i, c) in enumerate(here):
+            if oi not in ou:
+                tracks.append(dict(id=nid, x=c, v=(0.0, 0.0), m=0)); asg[(fr, i)] = nid; nid += 1
+    ids, owners = {}, {}
+    for (fr, i), tid in asg.items():
+        ids.setdefault(i, set()).add(tid); owners.setdefault(tid, set()).add(i)
+    ok = sum(1 for i, s in ids.items() if len(s) == 1 and len(owners[next(iter(s))]) == 1)
+    return ok / len(ids)
+default = run(0.2 * W, 0.3, 1)
+best = max(run(g * W, a, c) for g in (0.05, 0.1, 0.2, 0.3, 0.5) for a in (0.3, 1.0) for c in (0, 1))
+print(json.dumps([default, best]))
+"#;
+
+#[test]
+fn hardness_agrees_with_an_independent_python_nn() {
+    let d = tempfile::tempdir().unwrap();
+    let t = write_haul(d.path(), &cfg(4, 384, 30)).unwrap();
+    let h = hardness(&t);
+    let Some(out) = python(NN_PY, &[d.path().join("truth.json").to_str().unwrap()]) else {
+        return;
+    };
+    let v: Vec<f64> = serde_json::from_str(out.trim()).unwrap();
+    assert!(
+        (v[0] - h.default_rate).abs() < 1e-12,
+        "python {v:?} vs {h:?}"
+    );
+    assert!((v[1] - h.best_rate).abs() < 1e-12, "python {v:?} vs {h:?}");
+    assert!(h.fish >= 10 && h.best_rate < 0.6, "{h:?}");
+}

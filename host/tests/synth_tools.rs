@@ -13,12 +13,12 @@ use fishtrack::synth::SynthConfig;
 fn write_readme_montage() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/synthetic_montage.png");
     let config = SynthConfig {
-        frames: 4,
-        seed: 1,
+        frames: 13,
+        seed: 2,
         size: 2048,
         fish_rate: 1.0,
     };
-    write_montage(&path, config, &[2, 3, 4], 512).unwrap();
+    write_montage(&path, config, &[11, 12, 13], 512).unwrap();
     assert!(path.exists());
 }
 

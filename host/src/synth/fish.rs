@@ -72,7 +72,7 @@ impl FishSpec {
         let contrast = if rng.random_bool(0.3) {
             rng.random_range(7.0..15.0) // dim fish, close to the background
         } else {
-            rng.random_range(15.0..70.0)
+            rng.random_range(18.0..90.0)
         };
         FishSpec {
             length_mm,
@@ -84,7 +84,7 @@ impl FishSpec {
             contrast,
             tail_reflectivity: rng.random_range(0.1..0.55),
             countershade: rng.random_range(0.0..0.5),
-            texture_amp: rng.random_range(0.15..0.5),
+            texture_amp: rng.random_range(0.1..0.4),
             texture_mm: rng.random_range(8.0..35.0),
             bars: if rng.random_bool(0.3) {
                 (rng.random_range(0.1..0.35), rng.random_range(30.0..90.0))
@@ -368,11 +368,23 @@ impl FishLife {
                 centre = c;
                 z = centre.z;
             }
-            let heading = if tail_first {
-                phi + std::f64::consts::PI
+            // Bodies lean towards the trawl axis: the water carries the fish
+            // while it swims, so the body turns only part of the way to the
+            // direction it is displaced in.
+            let axis_dir = if phi.cos() < 0.0 {
+                std::f64::consts::PI
             } else {
-                phi
-            } + 0.2 * normal(rng);
+                0.0
+            };
+            let dev = (phi - axis_dir).sin().atan2((phi - axis_dir).cos());
+            let heading = axis_dir
+                + 0.6 * dev
+                + 0.15 * normal(rng)
+                + if tail_first {
+                    std::f64::consts::PI
+                } else {
+                    0.0
+                };
             let psi = (0.3 * normal(rng) + (vz / (0.5 * l + 1.0)).atan() * 0.5).clamp(-0.7, 0.7);
             let roll = 0.15 * normal(rng);
             let (axis, dorsal) = orientation(heading, psi, roll);
