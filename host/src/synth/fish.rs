@@ -9,11 +9,14 @@
 //! this arc length; its `head_mm`/`tail_mm` are the bent fish's end points.
 //!
 //! Motion (paper Section II: 5 fps, ≈ 4 frames of life in view): fish
-//! enter across a border (mostly the right one, heading −x; some swim +x;
-//! some enter across the top or bottom), take steps of 20–40 % of the
-//! view's width at their range with abrupt, independent changes of speed
-//! and heading each frame and occasional sharp turns, drift in range, and
-//! are dropped once well outside both views.
+//! arrive in small schools ([`School`]: shared entry border and place,
+//! heading, range, speed and size class) and enter across a border (mostly
+//! the right one, heading −x; 18 % swim +x; 38 % enter across the top or
+//! bottom). Each frame they step by 15–30 % of the view's width at their
+//! range, with abrupt, independent changes of speed (log-σ 0.45) and
+//! heading (σ 22°), occasional lasting turns of 30–85°, drift in range,
+//! and are dropped once well outside both views. Bodies point along the
+//! displacement but lean towards the trawl axis; 7 % drift tail first.
 
 use nalgebra::{Rotation3, Unit, Vector3};
 use rand::Rng;
