@@ -16,6 +16,7 @@ pub mod rectify;
 pub mod reference;
 pub mod reference_stereo;
 pub mod reference_track;
+pub mod synth;
 pub mod timing;
 pub mod truth;
 

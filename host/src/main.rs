@@ -104,7 +104,31 @@ fn not_built(name: &str) -> anyhow::Result<()> {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Demo { .. } => not_built("demo"),
-        Command::Synth { .. } => not_built("synth"),
+        Command::Synth {
+            dir,
+            frames,
+            seed,
+            size,
+            fish_rate,
+        } => {
+            let config = fishtrack::synth::SynthConfig {
+                frames,
+                seed,
+                size,
+                fish_rate,
+            };
+            let truth = fishtrack::synth::write_haul(&dir, &config)?;
+            println!(
+                "wrote {} frame pairs ({}x{}, seed {}) with {} fish to {}",
+                truth.frames,
+                truth.width,
+                truth.height,
+                truth.seed,
+                truth.fish.len(),
+                dir.display()
+            );
+            Ok(())
+        }
         Command::Track { .. } => not_built("track"),
         Command::Eval { haul, out, json } => {
             let report = fishtrack::eval::evaluate(&haul, &out)?;
