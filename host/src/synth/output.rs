@@ -10,6 +10,7 @@ use std::path::Path;
 use anyhow::Context;
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
+use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use crate::truth::{Truth, TruthFish, TruthFrame, TRUTH_VERSION};
@@ -76,6 +77,11 @@ pub fn build_truth(haul: &Haul, views: &Visibility) -> Truth {
                 continue;
             };
             let (head, tail) = pose.ends(&life.spec);
+            let px_left = |p: &Vector3<f64>| {
+                haul.rig
+                    .project(Cam::Left, p)
+                    .map(|(x, y)| [round_to(x + 0.5, 4), round_to(y + 0.5, 4)])
+            };
             let mm = |v: f64| round_to(v, 4);
             let bx = |v: Option<&FishView>| {
                 v.and_then(|v| v.bbox).map(|[x0, y0, x1, y1]| {
@@ -108,6 +114,9 @@ pub fn build_truth(haul: &Haul, views: &Visibility) -> Truth {
                 inside_right: r.is_some_and(|v| v.inside),
                 head_mm: [mm(head.x), mm(head.y), mm(head.z)],
                 tail_mm: [mm(tail.x), mm(tail.y), mm(tail.z)],
+                // raw left pixels, box convention (pixel centres at +0.5)
+                head_px_left: px_left(&head),
+                tail_px_left: px_left(&tail),
             });
         }
     }
