@@ -239,6 +239,8 @@ mod tests {
             inside_right: false,
             head_mm: [0.0; 3],
             tail_mm: [0.0; 3],
+            head_px_left: None,
+            tail_px_left: None,
         }
     }
 
