@@ -9,8 +9,9 @@
 #  1. stable:  cargo build --release -p fishtrack-core --target thumbv7em-none-eabihf [--features defmt]
 #     thumbv7em-none-eabihf ships a `core`/`alloc` but no `std`: any crate
 #     using std fails here.
-#  2. nightly: cargo +nightly build -Z build-std=core -p fishtrack-core --target thumbv7em-none-eabihf [--features defmt]
-#     Only `core` (and compiler_builtins) is built from source, so a crate
+#  2. nightly: cargo +nightly check -Z build-std=core -p fishtrack-core --target thumbv7em-none-eabihf [--features defmt]
+#     Only `core` (and compiler_builtins) is built from source (`check`: type
+#     checking is enough, and much faster than code generation), so a crate
 #     anywhere in the tree doing `extern crate alloc` (or std) fails to compile.
 #  3. size: text/data/bss of the object files inside the release rlib
 #     (llvm-size / arm-none-eabi-size / size).
@@ -92,9 +93,9 @@ fi
 # --- 2. nightly build-std=core: no alloc anywhere in the tree ---------------
 if [ "$have_nightly_src" = 1 ]; then
     for f in "${FEATURE_SETS[@]}"; do
-        say "nightly: cargo +nightly build -Z build-std=core -p fishtrack-core --target $TARGET $(feature_args "$f")"
+        say "nightly: cargo +nightly check -Z build-std=core -p fishtrack-core --target $TARGET $(feature_args "$f")"
         # shellcheck disable=SC2046
-        if cargo +nightly build -Z build-std=core -p fishtrack-core --target "$TARGET" \
+        if cargo +nightly check -Z build-std=core -p fishtrack-core --target "$TARGET" \
             --target-dir "$NOSTD_DIR" $(feature_args "$f"); then
             echo "OK   core-only sysroot ($(feature_name "$f")): no crate in the tree uses alloc or std"
         else
