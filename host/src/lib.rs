@@ -18,6 +18,7 @@ pub mod reference_stereo;
 pub mod reference_track;
 pub mod synth;
 pub mod timing;
+pub mod track_cmd;
 pub mod truth;
 
 pub use error::InputError;
