@@ -7,6 +7,8 @@
 #![deny(missing_docs)]
 
 pub mod calib;
+pub mod compare_cmd;
+pub mod demo_cmd;
 pub mod error;
 pub mod eval;
 pub mod haul;

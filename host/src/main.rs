@@ -104,7 +104,7 @@ fn not_built(name: &str) -> anyhow::Result<()> {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Demo { .. } => not_built("demo"),
+        Command::Demo { out } => fishtrack::demo_cmd::run(out),
         Command::Synth {
             dir,
             frames,
@@ -154,7 +154,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Compare { .. } => not_built("compare"),
+        Command::Compare { haul } => fishtrack::compare_cmd::run(&haul),
         Command::Bench { .. } => not_built("bench"),
         Command::TimingCheck { port, frames } => fishtrack::timing::run(&port, frames),
     }
