@@ -2,7 +2,6 @@
 //! commands, drive the strobe scheduler on the simulated board, process
 //! frames, and produce reports.
 
-use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
 use fishtrack_core::link::{
@@ -34,10 +33,9 @@ pub const LATE_STROBE_US: u64 = 300;
 
 /// What happens to each triggered frame: the device's image pipeline.
 ///
-/// The core vision pipeline (segmentation → stereo pairing → tracking →
-/// length, `fishtrack-core`) is hooked in here later, once it exists; the
-/// only implementation so far, [`HaulFrames`], reports that a frame of the
-/// haul was read and claims no objects, tracks or fish.
+/// The core vision pipeline (segmentation → stereo pairing → length →
+/// tracking, `fishtrack-core`) runs behind it in
+/// `crate::pipeline_frames::PipelineFrames`.
 pub trait FrameProcessor {
     /// Process frame `index` of the sequence; `None` when there is no such
     /// frame (no haul, or the haul is exhausted).
@@ -59,56 +57,6 @@ pub struct NoFrames;
 impl FrameProcessor for NoFrames {
     fn process_frame(&mut self, _index: u32) -> Option<FrameOutcome> {
         None
-    }
-}
-
-/// The frames of a haul directory (`DIR/left/*`). The pipeline is not
-/// hooked up yet: each frame is reported with zero objects and tracks.
-pub struct HaulFrames {
-    dir: PathBuf,
-    frames: u32,
-}
-
-impl HaulFrames {
-    /// Count the frame files in `dir/left`.
-    pub fn open(dir: &Path) -> anyhow::Result<Self> {
-        let left = dir.join("left");
-        let entries = std::fs::read_dir(&left)
-            .map_err(|e| anyhow::anyhow!("{}: cannot read haul frames: {e}", left.display()))?;
-        let mut frames = 0u32;
-        for e in entries {
-            let e = e.map_err(|e| anyhow::anyhow!("{}: {e}", left.display()))?;
-            if e.file_type().map(|t| t.is_file()).unwrap_or(false) {
-                frames = frames.saturating_add(1);
-            }
-        }
-        Ok(HaulFrames {
-            dir: dir.to_path_buf(),
-            frames,
-        })
-    }
-
-    /// Number of frames in the haul.
-    pub fn len(&self) -> u32 {
-        self.frames
-    }
-
-    /// The haul directory.
-    pub fn dir(&self) -> &Path {
-        &self.dir
-    }
-}
-
-impl FrameProcessor for HaulFrames {
-    fn process_frame(&mut self, index: u32) -> Option<FrameOutcome> {
-        (index < self.frames).then_some(FrameOutcome {
-            report: FrameReport {
-                frame: index,
-                objects: 0,
-                tracks: 0,
-            },
-            closed: Vec::new(),
-        })
     }
 }
 
@@ -431,51 +379,5 @@ mod tests {
         d.step(|_| {});
         d.handle(Command::Stop);
         assert!(!d.running());
-    }
-
-    #[test]
-    fn haul_frames_are_reported_without_invented_counts() {
-        let dir = tempdir();
-        std::fs::create_dir_all(dir.join("left")).unwrap();
-        for i in 0..2 {
-            std::fs::write(dir.join("left").join(format!("{i:06}.png")), b"x").unwrap();
-        }
-        let haul = HaulFrames::open(&dir).unwrap();
-        assert_eq!(haul.len(), 2);
-        let mut d = Device::new(None, Box::new(haul));
-        d.handle(Command::RunBench { frames: 3 });
-        let mut r = Vec::new();
-        while d.running() {
-            r.extend(d.step(|_| {}));
-        }
-        let frames: Vec<FrameReport> = r
-            .iter()
-            .filter_map(|r| match r {
-                Report::Frame(f) => Some(*f),
-                _ => None,
-            })
-            .collect();
-        assert_eq!(
-            frames,
-            vec![
-                FrameReport {
-                    frame: 0,
-                    objects: 0,
-                    tracks: 0
-                },
-                FrameReport {
-                    frame: 1,
-                    objects: 0,
-                    tracks: 0
-                }
-            ]
-        );
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    fn tempdir() -> PathBuf {
-        let d = std::env::temp_dir().join(format!("fishtrack-fwsim-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        d
     }
 }

@@ -11,6 +11,7 @@
 
 mod device;
 mod hw;
+mod pipeline_frames;
 
 use std::io::{ErrorKind, Read, Write};
 use std::path::PathBuf;
@@ -21,7 +22,8 @@ use anyhow::Context;
 use clap::Parser;
 use fishtrack_core::link::{self, Command, Decoder, DeviceError, ErrorCode, Report, MAX_FRAME};
 
-use device::{Device, Fault, FrameProcessor, HaulFrames, NoFrames};
+use device::{Device, Fault, FrameProcessor, NoFrames};
+use pipeline_frames::PipelineFrames;
 
 #[derive(Parser)]
 #[command(
@@ -72,9 +74,9 @@ impl Link {
 fn serve(cli: Cli) -> anyhow::Result<()> {
     let processor: Box<dyn FrameProcessor> = match &cli.haul {
         Some(dir) => {
-            let h = HaulFrames::open(dir)?;
+            let h = PipelineFrames::open(dir)?;
             eprintln!(
-                "fishtrack-firmware-sim: haul {} with {} frames (vision pipeline not hooked up yet: 0 objects/tracks reported)",
+                "fishtrack-firmware-sim: haul {} with {} frames through the core pipeline",
                 h.dir().display(),
                 h.len()
             );

@@ -7,6 +7,8 @@
 #![deny(missing_docs)]
 
 pub mod calib;
+pub mod compare_cmd;
+pub mod demo_cmd;
 pub mod error;
 pub mod eval;
 pub mod haul;
@@ -18,6 +20,7 @@ pub mod reference_stereo;
 pub mod reference_track;
 pub mod synth;
 pub mod timing;
+pub mod track_cmd;
 pub mod truth;
 
 pub use error::InputError;

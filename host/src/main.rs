@@ -45,8 +45,9 @@ enum Command {
     },
     /// Track fish in a haul and write tracks, fish, detections and summary.
     Track {
-        /// Haul directory.
-        haul: PathBuf,
+        /// Haul directories (several: one subfolder of OUT each).
+        #[arg(required = true)]
+        haul: Vec<PathBuf>,
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
@@ -56,9 +57,9 @@ enum Command {
         /// Also write overlays and the length-frequency plot.
         #[arg(long)]
         overlays: bool,
-        /// Data association: viterbi, mc or nn.
-        #[arg(long, default_value = "viterbi")]
-        tracker: String,
+        /// Data association: viterbi, mc or nn (default: the parameters', viterbi).
+        #[arg(long)]
+        tracker: Option<String>,
     },
     /// Score a tracker output directory against HAUL/truth.json.
     Eval {
@@ -103,7 +104,7 @@ fn not_built(name: &str) -> anyhow::Result<()> {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Demo { .. } => not_built("demo"),
+        Command::Demo { out } => fishtrack::demo_cmd::run(out),
         Command::Synth {
             dir,
             frames,
@@ -129,7 +130,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
-        Command::Track { .. } => not_built("track"),
+        Command::Track {
+            haul,
+            out,
+            params,
+            overlays,
+            tracker,
+        } => fishtrack::track_cmd::run(
+            &haul,
+            &out,
+            &fishtrack::track_cmd::TrackOptions {
+                params,
+                tracker,
+                overlays,
+            },
+        ),
         Command::Eval { haul, out, json } => {
             let report = fishtrack::eval::evaluate(&haul, &out)?;
             if json {
@@ -139,7 +154,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Compare { .. } => not_built("compare"),
+        Command::Compare { haul } => fishtrack::compare_cmd::run(&haul),
         Command::Bench { .. } => not_built("bench"),
         Command::TimingCheck { port, frames } => fishtrack::timing::run(&port, frames),
     }

@@ -1,0 +1,754 @@
+//! The whole device pipeline of one stereo frame pair (paper Fig. 6, the
+//! data flow of the system):
+//!
+//! ```text
+//! rectified left ─► segment (III) ─► left objects ─┐
+//! rectified right ─► segment (III) ─► right objects ┴► stereo pairing (IV.A)
+//!     ─► 3-D length per pair (IV.D) ─► observations ─► matching cost (IV.B)
+//!     + multi-target Viterbi data association (IV.C) ─► tracks ─► fish
+//!        (count + per-track length: median of the wholly-inside frames)
+//! ```
+//!
+//! Data flows one way; [`Pipeline::process_frame`] runs every stage on one
+//! frame and reports [`PipelineEvent`]s to a sink: every left object of the
+//! frame with its stereo result, every committed track frame (up to the
+//! trellis depth `D` frames late, see [`crate::track`]) with its box and 3-D
+//! centroid, every closed track with its length estimate (Section IV.D.2:
+//! the median of the per-frame lengths of the frames where the fish is
+//! wholly inside both views), the end of each stage (so a host can time the
+//! stages without the core owning a clock) and the frame's counters.
+//! [`Pipeline::finish`] closes the remaining tracks at the end of a haul.
+//!
+//! # Memory
+//! Everything is inline: `Pipeline<N, R, T, D, K, H, Q, F>` holds the left
+//! and right [`Objects<N, R>`], the frame's pairs, lengths and
+//! observations, the [`Tracker<T, D, K, H, N>`], a ring of the last `Q`
+//! frames' per-observation results (committed track frames arrive up to `D`
+//! frames late, so `Q > D` is required), and a table of `T` per-track
+//! [`LengthAccumulator<F>`]s keyed by track id. The segmentation scratch is
+//! the caller's `ws` of [`Pipeline::workspace_size`] bytes. Capacity
+//! overflow anywhere is counted in [`PipelineStats`], never fatal.
+//! `size_of::<DefaultPipeline>()` is checked to stay ≤ 512 KiB.
+
+use crate::error::ImageError;
+use crate::geometry::StereoGeometry;
+use crate::image::{ImageView, Roi};
+use crate::length::{
+    measure_length, wholly_inside, FishLength, LengthAccumulator, LengthConfig, LengthEstimate,
+};
+use crate::object::{Object, Objects, OrientedBox};
+use crate::params::Params;
+use crate::segment::{segment_frame, SegmentError, RECOMMENDED_MAX_ROI_PIXELS};
+use crate::stereo::{pair_objects, PairingLimits, StereoPair, StereoPairs};
+use crate::track::{
+    CameraView, CloseReason, Observation, TrackConfig, TrackError, TrackEvent, TrackStats, Tracker,
+};
+
+/// Refined disparity blocks per pair kept by the length stage.
+pub const REFINE_BLOCKS: usize = 1024;
+
+/// The default pipeline: 64 objects and 16384 mask runs per view, the
+/// [`crate::track::DefaultTracker`] capacities, an 18-frame history and 32
+/// lengths per track.
+pub type DefaultPipeline = Pipeline<64, 16384, 32, 16, 8, 32, 18, 32>;
+
+/// Why a frame could not be processed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum PipelineError {
+    /// Segmentation refused the frame (workspace, size, parameters).
+    Segment(SegmentError),
+    /// The two frames are unusable together.
+    Image(ImageError),
+    /// The tracker refused the frame or its configuration.
+    Track(TrackError),
+    /// The history depth `Q` must exceed the trellis depth `D`.
+    History,
+}
+
+impl core::fmt::Display for PipelineError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            PipelineError::Segment(e) => write!(f, "{e}"),
+            PipelineError::Image(e) => write!(f, "stereo: {e}"),
+            PipelineError::Track(e) => write!(f, "tracking: {e}"),
+            PipelineError::History => {
+                f.write_str("pipeline history must be deeper than the trellis")
+            }
+        }
+    }
+}
+
+impl core::error::Error for PipelineError {}
+
+/// Everything fixed for a haul.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PipelineConfig {
+    /// Table I parameters.
+    pub params: Params,
+    /// Rectified stereo geometry.
+    pub geometry: StereoGeometry,
+    /// Tracking options.
+    pub track: TrackConfig,
+    /// Stereo pairing gate.
+    pub pairing: PairingLimits,
+    /// Length stage options.
+    pub length: LengthConfig,
+    /// Border margin (pixels) for the wholly-inside test of a length.
+    pub inside_margin: u32,
+}
+
+impl PipelineConfig {
+    /// Defaults for `params` and `geometry` on `width × height` rectified frames.
+    pub fn new(params: Params, geometry: StereoGeometry, width: u32, height: u32) -> Self {
+        PipelineConfig {
+            params,
+            geometry,
+            track: TrackConfig::for_frame(width, height),
+            pairing: PairingLimits::default(),
+            length: LengthConfig::default(),
+            inside_margin: 2,
+        }
+    }
+}
+
+/// A pipeline stage, reported when it ends ([`PipelineEvent::StageDone`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Stage {
+    /// Segmentation of the left frame.
+    SegmentLeft,
+    /// Segmentation of the right frame.
+    SegmentRight,
+    /// Stereo pairing.
+    Pair,
+    /// Length measurement of every pair.
+    Length,
+    /// Tracking (data association and events).
+    Track,
+}
+
+/// The stereo result of one left object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StereoInfo {
+    /// Index of the right object.
+    pub right: u16,
+    /// The right object's upright box, rectified pixels.
+    pub right_box: Roi,
+    /// The pair as stereo pairing found it.
+    pub pair: StereoPair,
+    /// The length measurement, if it succeeded.
+    pub length: Option<FishLength>,
+    /// Both boxes keep the margin from every border (length usable).
+    pub wholly_inside: bool,
+}
+
+/// Per-frame counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameCounts {
+    /// Left objects.
+    pub left_objects: u32,
+    /// Right objects.
+    pub right_objects: u32,
+    /// Stereo pairs.
+    pub pairs: u32,
+    /// Pairs with a length.
+    pub measured: u32,
+    /// Live tracks after the frame.
+    pub live_tracks: u32,
+}
+
+/// What the pipeline reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PipelineEvent {
+    /// A stage of the current frame ended.
+    StageDone {
+        /// The frame.
+        frame: u32,
+        /// The stage.
+        stage: Stage,
+    },
+    /// One left object of the frame (all rectified pixels).
+    Object {
+        /// The frame.
+        frame: u32,
+        /// Index among the frame's left objects (= observation index).
+        index: u16,
+        /// Upright box.
+        bbox: Roi,
+        /// Oriented box (its width `2·half_w` is the oriented length, px).
+        obb: OrientedBox,
+        /// Mask area, pixels.
+        area: u32,
+        /// Stereo result, if paired.
+        stereo: Option<StereoInfo>,
+    },
+    /// One committed frame of a track.
+    TrackFrame {
+        /// Track id.
+        track: u32,
+        /// The frame.
+        frame: u32,
+        /// Observation (= left object) index, `None` when predicted.
+        obs: Option<u16>,
+        /// Upright left box, rectified pixels (predicted frames: the last
+        /// observed box moved to the predicted position).
+        bbox: Roi,
+        /// 3-D centroid, mm, rectified left camera frame, if known.
+        centre: Option<[f32; 3]>,
+    },
+    /// A track ended; all its frames were reported before.
+    TrackClosed {
+        /// Track id.
+        track: u32,
+        /// Why.
+        reason: CloseReason,
+        /// First frame with an observation.
+        first_frame: u32,
+        /// Last frame with an observation.
+        last_frame: u32,
+        /// Committed frames reported for it (observed or predicted).
+        frames: u32,
+        /// Frames with an observation.
+        hits: u32,
+        /// Length estimate over the wholly-inside measured frames.
+        length: LengthEstimate,
+        /// Median range (distance of the 3-D centroid from the left camera), mm.
+        range_mm: Option<f32>,
+    },
+    /// The frame is done.
+    FrameDone {
+        /// The frame.
+        frame: u32,
+        /// Its counters.
+        counts: FrameCounts,
+    },
+}
+
+/// Cumulative counters, capacity drops included.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PipelineStats {
+    /// Frames processed.
+    pub frames: u32,
+    /// Left objects segmented.
+    pub left_objects: u32,
+    /// Right objects segmented.
+    pub right_objects: u32,
+    /// Left objects dropped by the `Objects` capacity.
+    pub left_objects_dropped: u32,
+    /// Right objects dropped by the `Objects` capacity.
+    pub right_objects_dropped: u32,
+    /// Stereo pairs.
+    pub pairs: u32,
+    /// Pairs measured.
+    pub measured: u32,
+    /// Pairs whose length measurement failed.
+    pub length_failed: u32,
+    /// Observations that did not fit the frame's `N`.
+    pub observations_dropped: u32,
+    /// Track frames whose frame had left the history ring (no box/length).
+    pub history_misses: u32,
+    /// Tracks not given a length accumulator (table of `T` full).
+    pub accumulators_dropped: u32,
+    /// Per-track lengths beyond `F` (ignored).
+    pub lengths_dropped: u32,
+    /// The tracker's counters.
+    pub track: TrackStats,
+}
+
+/// Per-observation result kept for late committed track frames.
+#[derive(Debug, Clone, Copy, Default)]
+struct ObsInfo {
+    bbox: Roi,
+    cx: f32,
+    cy: f32,
+    length_mm: Option<f32>,
+    inside: bool,
+    centre: Option<[f32; 3]>,
+}
+
+#[derive(Debug, Clone)]
+struct FrameSlot<const N: usize> {
+    frame: Option<u32>,
+    obs: heapless::Vec<ObsInfo, N>,
+}
+
+#[derive(Debug, Clone)]
+struct TrackAcc<const F: usize> {
+    id: u32,
+    lengths: LengthAccumulator<F>,
+    ranges: LengthAccumulator<F>,
+    frames: u32,
+    /// Last observed box relative to its centroid: (dx, dy, w, h).
+    last_box: Option<(f32, f32, u32, u32)>,
+}
+
+/// The per-frame pipeline state (see the module documentation).
+///
+/// `N` objects per view (and observations per frame), `R` mask runs per
+/// view, `T` live tracks, `D` trellis depth, `K` nodes per stage, `H` path
+/// steps per track, `Q` frames of history (`Q > D`), `F` lengths per track.
+#[derive(Debug, Clone)]
+pub struct Pipeline<
+    const N: usize,
+    const R: usize,
+    const T: usize,
+    const D: usize,
+    const K: usize,
+    const H: usize,
+    const Q: usize,
+    const F: usize,
+> {
+    cfg: PipelineConfig,
+    left: Objects<N, R>,
+    right: Objects<N, R>,
+    pairs: StereoPairs<N>,
+    lengths: heapless::Vec<Option<FishLength>, N>,
+    observations: heapless::Vec<Observation, N>,
+    tracker: Tracker<T, D, K, H, N>,
+    history: [FrameSlot<N>; Q],
+    accs: heapless::Vec<TrackAcc<F>, T>,
+    stats: PipelineStats,
+}
+
+fn view_of(o: &Object) -> CameraView {
+    CameraView {
+        cx: o.obb.cx,
+        cy: o.obb.cy,
+        bbox: o.bbox,
+        area: o.area,
+        hist: o.hist,
+    }
+}
+
+fn norm3(p: &[f32; 3]) -> f32 {
+    micromath::F32(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+        .sqrt()
+        .0
+}
+
+impl<
+        const N: usize,
+        const R: usize,
+        const T: usize,
+        const D: usize,
+        const K: usize,
+        const H: usize,
+        const Q: usize,
+        const F: usize,
+    > Pipeline<N, R, T, D, K, H, Q, F>
+{
+    /// Scratch bytes [`Pipeline::process_frame`] needs for `width × height`
+    /// frames: the segmentation workspace with an ROI capacity of
+    /// `min(width·height, RECOMMENDED_MAX_ROI_PIXELS)`.
+    pub const fn workspace_size(width: usize, height: usize) -> usize {
+        let px = width.saturating_mul(height);
+        let roi = if px < RECOMMENDED_MAX_ROI_PIXELS {
+            px
+        } else {
+            RECOMMENDED_MAX_ROI_PIXELS
+        };
+        crate::segment::workspace_size(width, height, roi)
+    }
+
+    /// A pipeline for a haul. Fails on invalid parameters, tracking
+    /// configuration or capacities.
+    pub fn new(cfg: PipelineConfig) -> Result<Self, PipelineError> {
+        if Q <= D {
+            return Err(PipelineError::History);
+        }
+        cfg.params
+            .validate()
+            .map_err(|e| PipelineError::Track(TrackError::Params(e)))?;
+        let tracker = Tracker::new(cfg.track).map_err(PipelineError::Track)?;
+        Ok(Pipeline {
+            cfg,
+            left: Objects::new(),
+            right: Objects::new(),
+            pairs: StereoPairs::default(),
+            lengths: heapless::Vec::new(),
+            observations: heapless::Vec::new(),
+            tracker,
+            history: core::array::from_fn(|_| FrameSlot {
+                frame: None,
+                obs: heapless::Vec::new(),
+            }),
+            accs: heapless::Vec::new(),
+            stats: PipelineStats::default(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PipelineConfig {
+        &self.cfg
+    }
+
+    /// Cumulative counters.
+    pub fn stats(&self) -> PipelineStats {
+        let mut s = self.stats;
+        s.track = self.tracker.stats();
+        s
+    }
+
+    /// The last frame's left objects.
+    pub fn left_objects(&self) -> &Objects<N, R> {
+        &self.left
+    }
+
+    /// The last frame's right objects.
+    pub fn right_objects(&self) -> &Objects<N, R> {
+        &self.right
+    }
+
+    /// The last frame's stereo pairs.
+    pub fn pairs(&self) -> &StereoPairs<N> {
+        &self.pairs
+    }
+
+    /// The last frame's lengths, one per pair (same order).
+    pub fn lengths(&self) -> &[Option<FishLength>] {
+        &self.lengths
+    }
+
+    /// The last frame's observations, one per left object (same order).
+    pub fn observations(&self) -> &[Observation] {
+        &self.observations
+    }
+
+    /// Runs every stage on one rectified frame pair (see the module
+    /// documentation). `frame` must increase from call to call.
+    pub fn process_frame(
+        &mut self,
+        frame: u32,
+        left: ImageView<'_>,
+        right: ImageView<'_>,
+        ws: &mut [u8],
+        sink: &mut impl FnMut(&PipelineEvent),
+    ) -> Result<(), PipelineError> {
+        if left.width() != right.width() || left.height() != right.height() {
+            return Err(PipelineError::Image(ImageError::SizeMismatch));
+        }
+        let params = self.cfg.params;
+        let stage = |sink: &mut dyn FnMut(&PipelineEvent), stage| {
+            sink(&PipelineEvent::StageDone { frame, stage })
+        };
+        segment_frame(left, &params, ws, &mut self.left).map_err(PipelineError::Segment)?;
+        stage(sink, Stage::SegmentLeft);
+        segment_frame(right, &params, ws, &mut self.right).map_err(PipelineError::Segment)?;
+        stage(sink, Stage::SegmentRight);
+        self.stats.frames = self.stats.frames.saturating_add(1);
+        self.stats.left_objects = self
+            .stats
+            .left_objects
+            .saturating_add(self.left.items.len() as u32);
+        self.stats.right_objects = self
+            .stats
+            .right_objects
+            .saturating_add(self.right.items.len() as u32);
+        self.stats.left_objects_dropped = self
+            .stats
+            .left_objects_dropped
+            .saturating_add(self.left.dropped);
+        self.stats.right_objects_dropped = self
+            .stats
+            .right_objects_dropped
+            .saturating_add(self.right.dropped);
+
+        self.pairs = pair_objects(
+            &left,
+            &right,
+            &self.left,
+            &self.right,
+            &self.cfg.geometry,
+            &self.cfg.pairing,
+        )
+        .map_err(PipelineError::Image)?;
+        stage(sink, Stage::Pair);
+
+        self.lengths.clear();
+        let (w, h) = (left.width() as u32, left.height() as u32);
+        for p in self.pairs.pairs.iter() {
+            let l = measure_length::<N, R, REFINE_BLOCKS>(
+                &left,
+                &right,
+                &self.left,
+                &self.right,
+                p,
+                &self.cfg.geometry,
+                &params,
+                &self.cfg.length,
+            );
+            let l = match l {
+                Ok(v) => Some(v),
+                Err(_) => {
+                    self.stats.length_failed = self.stats.length_failed.saturating_add(1);
+                    None
+                }
+            };
+            // one length per pair: the pairs fit N, so this push cannot fail
+            let _ = self.lengths.push(l);
+        }
+        stage(sink, Stage::Length);
+
+        // observations, the frame's history slot and the object events
+        self.observations.clear();
+        let slot_i = frame as usize % Q;
+        let mut counts = FrameCounts {
+            left_objects: self.left.items.len() as u32,
+            right_objects: self.right.items.len() as u32,
+            pairs: self.pairs.pairs.len() as u32,
+            ..FrameCounts::default()
+        };
+        if let Some(slot) = self.history.get_mut(slot_i) {
+            slot.frame = Some(frame);
+            slot.obs.clear();
+        }
+        for (i, lo) in self.left.items.iter().enumerate() {
+            let pi = self.pairs.pairs.iter().position(|p| p.left as usize == i);
+            let stereo = pi.and_then(|k| {
+                let p = *self.pairs.pairs.get(k)?;
+                let ro = self.right.items.get(p.right as usize)?;
+                let length = self.lengths.get(k).copied().flatten();
+                Some(StereoInfo {
+                    right: p.right,
+                    right_box: ro.bbox,
+                    pair: p,
+                    length,
+                    wholly_inside: wholly_inside(&lo.bbox, &ro.bbox, w, h, self.cfg.inside_margin),
+                })
+            });
+            let depth = stereo.and_then(|s| self.cfg.geometry.depth(s.pair.d_o));
+            let obs = Observation {
+                left: view_of(lo),
+                right: stereo
+                    .and_then(|s| self.right.items.get(s.right as usize))
+                    .map(view_of),
+                depth_mm: depth,
+                pair: i as u16,
+            };
+            if self.observations.push(obs).is_err() {
+                self.stats.observations_dropped = self.stats.observations_dropped.saturating_add(1);
+            }
+            let length_mm = stereo.and_then(|s| s.length).map(|l| l.length_mm);
+            if length_mm.is_some() {
+                counts.measured += 1;
+            }
+            let centre = stereo.and_then(|s| {
+                s.length.map(|l| l.centre).or_else(|| {
+                    self.cfg
+                        .geometry
+                        .triangulate(lo.obb.cx, lo.obb.cy, s.pair.d_o)
+                        .map(|p| [p.x, p.y, p.z])
+                })
+            });
+            let info = ObsInfo {
+                bbox: lo.bbox,
+                cx: lo.obb.cx,
+                cy: lo.obb.cy,
+                length_mm,
+                inside: stereo.is_some_and(|s| s.wholly_inside),
+                centre,
+            };
+            if let Some(slot) = self.history.get_mut(slot_i) {
+                let _ = slot.obs.push(info);
+            }
+            sink(&PipelineEvent::Object {
+                frame,
+                index: i as u16,
+                bbox: lo.bbox,
+                obb: lo.obb,
+                area: lo.area,
+                stereo,
+            });
+        }
+        self.stats.pairs = self.stats.pairs.saturating_add(counts.pairs);
+        self.stats.measured = self.stats.measured.saturating_add(counts.measured);
+
+        let Pipeline {
+            tracker,
+            history,
+            accs,
+            stats,
+            observations,
+            ..
+        } = self;
+        let mut on_track = |e: &TrackEvent<'_>| handle(e, history, accs, stats, sink);
+        tracker
+            .step(frame, observations, &params, &mut on_track)
+            .map_err(PipelineError::Track)?;
+        stage(sink, Stage::Track);
+        counts.live_tracks = self.tracker.live_targets() as u32;
+        sink(&PipelineEvent::FrameDone { frame, counts });
+        Ok(())
+    }
+
+    /// Closes every live track at the end of a haul, reporting their
+    /// remaining frames and their lengths. The pipeline can then start a
+    /// new haul.
+    pub fn finish(&mut self, sink: &mut impl FnMut(&PipelineEvent)) {
+        let Pipeline {
+            tracker,
+            history,
+            accs,
+            stats,
+            ..
+        } = self;
+        let mut on_track = |e: &TrackEvent<'_>| handle(e, history, accs, stats, sink);
+        tracker.finish(&mut on_track);
+        self.accs.clear();
+        for s in self.history.iter_mut() {
+            s.frame = None;
+            s.obs.clear();
+        }
+    }
+}
+
+/// Turns a tracker event into pipeline events, feeding the per-track
+/// length accumulators.
+fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
+    e: &TrackEvent<'_>,
+    history: &[FrameSlot<N>; Q],
+    accs: &mut heapless::Vec<TrackAcc<F>, T>,
+    stats: &mut PipelineStats,
+    sink: &mut impl FnMut(&PipelineEvent),
+) {
+    match *e {
+        TrackEvent::Frame { track, step } => {
+            let slot = history
+                .get(step.frame as usize % Q.max(1))
+                .filter(|s| s.frame == Some(step.frame));
+            if slot.is_none() && step.obs.is_some() {
+                stats.history_misses = stats.history_misses.saturating_add(1);
+            }
+            let info = step
+                .obs
+                .and_then(|i| slot.and_then(|s| s.obs.get(i as usize)));
+            let k = match accs.iter().position(|a| a.id == track) {
+                Some(k) => Some(k),
+                None => {
+                    let fresh = TrackAcc {
+                        id: track,
+                        lengths: LengthAccumulator::new(),
+                        ranges: LengthAccumulator::new(),
+                        frames: 0,
+                        last_box: None,
+                    };
+                    if accs.push(fresh).is_ok() {
+                        Some(accs.len() - 1)
+                    } else {
+                        stats.accumulators_dropped = stats.accumulators_dropped.saturating_add(1);
+                        None
+                    }
+                }
+            };
+            let acc = k.and_then(|k| accs.get_mut(k));
+            let (bbox, centre) = match info {
+                Some(o) => (o.bbox, o.centre),
+                None => (predicted_box(acc.as_deref(), step.x, step.y), None),
+            };
+            if let Some(a) = acc {
+                a.frames = a.frames.saturating_add(1);
+                if let Some(o) = info {
+                    let before = a.lengths.dropped;
+                    a.lengths.push(o.length_mm, o.inside);
+                    if a.lengths.dropped > before {
+                        stats.lengths_dropped = stats.lengths_dropped.saturating_add(1);
+                    }
+                    a.ranges.push(o.centre.as_ref().map(norm3), true);
+                    a.last_box = Some((
+                        o.bbox.x as f32 - o.cx,
+                        o.bbox.y as f32 - o.cy,
+                        o.bbox.w,
+                        o.bbox.h,
+                    ));
+                }
+            }
+            sink(&PipelineEvent::TrackFrame {
+                track,
+                frame: step.frame,
+                obs: if info.is_some() { step.obs } else { None },
+                bbox,
+                centre,
+            });
+        }
+        TrackEvent::Closed {
+            track,
+            reason,
+            first_frame,
+            last_frame,
+            hits,
+            ..
+        } => {
+            let k = accs.iter().position(|a| a.id == track);
+            let (length, range_mm, frames) = match k.and_then(|k| accs.get(k)) {
+                Some(a) => (
+                    a.lengths.estimate(),
+                    a.ranges.estimate().median_mm,
+                    a.frames,
+                ),
+                None => (LengthEstimate::default(), None, 0),
+            };
+            if let Some(k) = k {
+                accs.swap_remove(k);
+            }
+            sink(&PipelineEvent::TrackClosed {
+                track,
+                reason,
+                first_frame,
+                last_frame,
+                frames,
+                hits,
+                length,
+                range_mm,
+            });
+        }
+    }
+}
+
+/// The last observed box of a track moved to the predicted centroid.
+fn predicted_box<const F: usize>(acc: Option<&TrackAcc<F>>, x: i16, y: i16) -> Roi {
+    match acc.and_then(|a| a.last_box) {
+        Some((dx, dy, w, h)) => {
+            let x0 = x as f32 + dx;
+            let y0 = y as f32 + dy;
+            let c = |v: f32| if v > 0.0 { v as u32 } else { 0 };
+            Roi::new(c(x0), c(y0), w, h)
+        }
+        None => Roi::new(x.max(0) as u32, y.max(0) as u32, 0, 0),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_pipeline_fits_512_kib() {
+        let n = core::mem::size_of::<DefaultPipeline>();
+        std::println!("size_of::<DefaultPipeline>() = {n}");
+        assert!(n <= 512 * 1024, "{n}");
+    }
+
+    #[test]
+    fn history_must_be_deeper_than_trellis() {
+        let geom = StereoGeometry {
+            f: 1000.0,
+            cx: 256.0,
+            cy: 256.0,
+            cx_right: 256.0,
+            baseline_mm: 100.0,
+        };
+        let cfg = PipelineConfig::new(Params::for_frame(512), geom, 512, 512);
+        assert_eq!(
+            Pipeline::<4, 64, 4, 8, 4, 8, 8, 8>::new(cfg).err(),
+            Some(PipelineError::History)
+        );
+        assert!(Pipeline::<4, 64, 4, 8, 4, 8, 9, 8>::new(cfg).is_ok());
+    }
+}

@@ -1,0 +1,219 @@
+//! `fishtrack compare HAUL`: the no-heap core against the float reference
+//! on the haul's rectified frames (DESIGN.md, "Float reference"):
+//! segmentation of both views ([`crate::reference::compare`]: thresholds
+//! within 1 grey level, identical object sets, mask IoU ≥ 0.99), stereo
+//! pairs and lengths ([`crate::reference_stereo::compare`] on the core's
+//! objects: identical pairs, lengths within 0.5 %), and track assignments
+//! ([`crate::reference_track`] on the observations the pipeline built:
+//! identical). Prints an agreement table; any disagreement is an error
+//! (exit 1).
+
+use std::path::Path;
+
+use anyhow::Result;
+
+use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
+
+use crate::reference::compare::compare_segmentation;
+use crate::reference_stereo::{self as rs, Geometry, Gray, Limits};
+use crate::reference_track::{self as rt, Assignment, Capacities};
+use crate::track_cmd::{new_pipeline, prepare, views, TrackOptions};
+
+#[derive(Default)]
+struct Tally {
+    frames: usize,
+    pass: usize,
+    worst: f64,
+    first_fail: Option<String>,
+}
+
+impl Tally {
+    fn add(&mut self, ok: bool, value: f64, what: impl FnOnce() -> String) {
+        self.frames += 1;
+        self.worst = self.worst.max(value);
+        if ok {
+            self.pass += 1;
+        } else if self.first_fail.is_none() {
+            self.first_fail = Some(what());
+        }
+    }
+
+    fn ok(&self) -> bool {
+        self.pass == self.frames
+    }
+}
+
+/// Runs the comparison on `dir` and prints the table; errors when any
+/// criterion fails.
+pub fn run(dir: &Path) -> Result<()> {
+    let setup = prepare(dir, &TrackOptions::default())?;
+    let mut pipe = new_pipeline(&setup)?;
+    let cfg = setup.pipeline_config();
+    let mut ws =
+        vec![0u8; DefaultPipeline::workspace_size(setup.width as usize, setup.height as usize)];
+    let geom = Geometry::from_core(&setup.geometry);
+    let limits = Limits::from(&cfg.pairing);
+    let (mut seg, mut pairs, mut lengths) = (Tally::default(), Tally::default(), Tally::default());
+    let mut all_obs = Vec::new();
+    let mut core_asg: Vec<Assignment> = Vec::new();
+    let on_event = |e: &PipelineEvent, out: &mut Vec<Assignment>| {
+        if let PipelineEvent::TrackFrame {
+            track, frame, obs, ..
+        } = *e
+        {
+            out.push(Assignment { frame, track, obs });
+        }
+    };
+    for pair in &setup.haul.frames {
+        let (l, r) = setup.rectified(pair)?;
+        for (side, img) in [("left", &l), ("right", &r)] {
+            let (a, _) = compare_segmentation(img, &setup.params).map_err(|e| {
+                anyhow::anyhow!(
+                    "frame {} ({side}): core segmentation failed: {e}",
+                    pair.index
+                )
+            })?;
+            let worst = 1.0 - a.min_iou;
+            seg.add(a.passes(), worst, || {
+                format!(
+                    "frame {} {side}: core {} / reference {} objects, {} matched, min IoU {:.4}, τ diff {}, length diff {:.4}",
+                    pair.index, a.core_objects, a.ref_objects, a.matched, a.min_iou, a.max_tau_diff, a.max_length_rel_diff
+                )
+            });
+        }
+        let (lv, rv) = views(&l, &r)?;
+        pipe.process_frame(pair.index, lv, rv, &mut ws, &mut |e| {
+            on_event(e, &mut core_asg)
+        })
+        .map_err(|e| anyhow::anyhow!("frame {}: pipeline: {e}", pair.index))?;
+        all_obs.push(pipe.observations().to_vec());
+        // stereo on the core's objects
+        let lo = rs::ref_objects(pipe.left_objects());
+        let ro = rs::ref_objects(pipe.right_objects());
+        let (w, h) = (l.width() as usize, l.height() as usize);
+        let lg = Gray {
+            data: l.as_raw(),
+            w,
+            h,
+        };
+        let rg = Gray {
+            data: r.as_raw(),
+            w,
+            h,
+        };
+        let ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
+        let reference: Vec<(usize, usize, Option<f64>)> = ref_pairs
+            .iter()
+            .map(|p| {
+                let len = rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length);
+                (p.left, p.right, len.map(|v| v.length))
+            })
+            .collect();
+        let core: Vec<(usize, usize, Option<f64>)> = pipe
+            .pairs()
+            .pairs
+            .iter()
+            .zip(pipe.lengths())
+            .map(|(p, l)| {
+                (
+                    p.left as usize,
+                    p.right as usize,
+                    l.map(|v| v.length_mm as f64),
+                )
+            })
+            .collect();
+        let a = rs::compare(&core, &reference);
+        pairs.add(a.pairs_identical, 0.0, || {
+            format!(
+                "frame {}: core pairs {:?}, reference pairs {:?}",
+                pair.index,
+                core.iter().map(|c| (c.0, c.1)).collect::<Vec<_>>(),
+                reference.iter().map(|c| (c.0, c.1)).collect::<Vec<_>>()
+            )
+        });
+        lengths.add(
+            a.measured_by_one == 0 && a.max_length_rel_diff <= 0.005,
+            a.max_length_rel_diff,
+            || {
+                format!(
+                    "frame {}: largest length difference {:.3} %, {} pairs measured by one side only",
+                    pair.index,
+                    100.0 * a.max_length_rel_diff,
+                    a.measured_by_one
+                )
+            },
+        );
+    }
+    pipe.finish(&mut |e| on_event(e, &mut core_asg));
+    // the reference numbers frames by slice index from 0; the haul from 1
+    let ref_asg: Vec<Assignment> =
+        rt::run(&all_obs, &setup.params, &cfg.track, Capacities::DEFAULT)
+            .into_iter()
+            .map(|a| Assignment {
+                frame: a.frame + 1,
+                ..a
+            })
+            .collect();
+    let ta = rt::compare(&core_asg, &ref_asg);
+
+    println!(
+        "fishtrack compare: {} ({} frame pairs), core vs float reference",
+        setup.haul.dir.display(),
+        setup.haul.frames.len()
+    );
+    println!(
+        "{:<52} {:>12} {:>10}  result",
+        "criterion", "frames ok", "worst"
+    );
+    let line = |name: &str, t: &Tally, worst: String| {
+        println!(
+            "{:<52} {:>12} {:>10}  {}",
+            name,
+            format!("{}/{}", t.pass, t.frames),
+            worst,
+            if t.ok() { "agree" } else { "DISAGREE" }
+        );
+    };
+    line(
+        "segmentation (τ ±1, same objects, IoU ≥ 0.99)",
+        &seg,
+        format!("{:.4}", 1.0 - seg.worst),
+    );
+    line("stereo pairs identical", &pairs, "-".into());
+    line(
+        "stereo lengths within 0.5 %",
+        &lengths,
+        format!("{:.3} %", 100.0 * lengths.worst),
+    );
+    println!(
+        "{:<52} {:>12} {:>10}  {}",
+        "track assignments identical",
+        format!("{}/{}", ta.same, ta.same + ta.differing),
+        ta.differing,
+        if ta.identical() { "agree" } else { "DISAGREE" }
+    );
+    let mut failed = Vec::new();
+    for (name, t) in [
+        ("segmentation", &seg),
+        ("stereo pairs", &pairs),
+        ("stereo lengths", &lengths),
+    ] {
+        if let Some(f) = &t.first_fail {
+            println!("first {name} disagreement: {f}");
+            failed.push(name);
+        }
+    }
+    if !ta.identical() {
+        println!(
+            "track assignments only in the core: {:?}; only in the reference: {:?}",
+            ta.only_a, ta.only_b
+        );
+        failed.push("track assignments");
+    }
+    if failed.is_empty() {
+        println!("core and reference agree");
+        Ok(())
+    } else {
+        anyhow::bail!("core and reference disagree: {}", failed.join(", "))
+    }
+}

@@ -1,0 +1,523 @@
+//! `fishtrack track HAUL... --out OUT`: the main job (DESIGN.md, "Output").
+//!
+//! Per haul: open it, load the calibration (frame size from the first frame
+//! where the layout lacks it), build the rectification maps, the Table I
+//! parameters (`Params::for_frame(width)` or `--params FILE`, then
+//! `--tracker`), and run every frame pair through read → rectify →
+//! [`fishtrack_core::pipeline::Pipeline`] (paper Fig. 6). The pipeline's
+//! rectified boxes are mapped back into the raw images
+//! ([`RectifiedCamera::rect_box_to_raw`]) and its 3-D points from the
+//! rectified into the raw left camera frame (`R1ᵀ·X`), in mm. Writes
+//! `tracks.csv`, `fish.csv`, `detections.csv`, `detections.viame.csv`,
+//! `stereo.csv` and `summary.json` (atomic, deterministic apart from the
+//! timings in `summary.json`). Several hauls: one subfolder
+//! `OUT/<haul dir name>/` each.
+//!
+//! A track the tracker closed as a duplicate of another (same fish counted
+//! twice, see `core::track`) is not a fish: its rows are left out of
+//! `tracks.csv`, `fish.csv` and the VIAME file and counted in the summary.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use image::GrayImage;
+use nalgebra::{Matrix3x4, Vector3};
+use serde_json::json;
+
+use fishtrack_core::geometry::StereoGeometry;
+use fishtrack_core::image::Roi;
+use fishtrack_core::params::{Params, Tracker as Association};
+use fishtrack_core::pipeline::{
+    DefaultPipeline, PipelineConfig, PipelineEvent, PipelineStats, Stage,
+};
+use fishtrack_core::track::CloseReason;
+use fishtrack_core::ImageView;
+
+use crate::calib::StereoCalib;
+use crate::error::InputError;
+use crate::haul::{FramePair, Haul};
+use crate::output::{
+    write_detections, write_fish, write_json, write_stereo, write_tracks, write_viame,
+    DetectionRow, FishOut, StereoOut, TrackRow,
+};
+use crate::rectify::{RectifiedCamera, Rectifier};
+
+/// Frames per second of Cam-trawl video (VIAME metadata).
+pub const FPS: f64 = 5.0;
+
+/// Command-line options of `fishtrack track`.
+#[derive(Debug, Clone, Default)]
+pub struct TrackOptions {
+    /// `--params FILE`.
+    pub params: Option<PathBuf>,
+    /// `--tracker viterbi|mc|nn`.
+    pub tracker: Option<String>,
+    /// `--overlays`.
+    pub overlays: bool,
+}
+
+/// A haul made ready for the pipeline.
+pub struct Setup {
+    /// The haul.
+    pub haul: Haul,
+    /// Rectification maps and cameras.
+    pub rectifier: Rectifier,
+    /// Parameters in use.
+    pub params: Params,
+    /// Rectified stereo geometry.
+    pub geometry: StereoGeometry,
+    /// Frame width.
+    pub width: u32,
+    /// Frame height.
+    pub height: u32,
+}
+
+/// Parses `--tracker`.
+pub fn parse_tracker(s: &str) -> Result<Association, InputError> {
+    match s.to_ascii_lowercase().as_str() {
+        "viterbi" => Ok(Association::Viterbi),
+        "mc" => Ok(Association::Mc),
+        "nn" => Ok(Association::Nn),
+        _ => Err(InputError::plain(
+            "--tracker",
+            format!("`{s}` is not one of viterbi, mc, nn"),
+        )),
+    }
+}
+
+/// Opens `dir` and prepares calibration, rectification, parameters and geometry.
+pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
+    let haul = Haul::open(dir)?;
+    let first = haul
+        .frames
+        .first()
+        .ok_or_else(|| InputError::file(dir.join("left"), "the haul has no frames"))?;
+    let size = image::image_dimensions(&first.left).map_err(|e| {
+        InputError::file(
+            &first.left,
+            format!("frame {}: cannot read: {e}", first.index),
+        )
+    })?;
+    haul.calibration()?;
+    let calib = StereoCalib::load(&haul.dir, Some(size))?;
+    let rectifier = Rectifier::new(&calib);
+    if rectifier.rect.vertical {
+        return Err(InputError::file(
+            &haul.dir,
+            "calibration has a vertical baseline; only side-by-side rigs are supported",
+        )
+        .into());
+    }
+    let p1: Matrix3x4<f32> = rectifier.rect.p1.cast();
+    let p2: Matrix3x4<f32> = rectifier.rect.p2.cast();
+    let geometry = StereoGeometry::from_projections(&p1, &p2).map_err(|e| {
+        InputError::file(
+            &haul.dir,
+            format!("calibration gives no usable stereo geometry: {e:?}"),
+        )
+    })?;
+    let (width, height) = (calib.width, calib.height);
+    let mut params = match &opts.params {
+        Some(p) => crate::params_file::load_params(p, width)?,
+        None => Params::for_frame(width),
+    };
+    if let Some(t) = &opts.tracker {
+        params.tracker = parse_tracker(t)?;
+    }
+    params
+        .validate()
+        .map_err(|e| InputError::plain("parameters", format!("{e}")))?;
+    Ok(Setup {
+        haul,
+        rectifier,
+        params,
+        geometry,
+        width,
+        height,
+    })
+}
+
+impl Setup {
+    /// The pipeline configuration of this haul.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        PipelineConfig::new(self.params, self.geometry, self.width, self.height)
+    }
+
+    /// Loads and rectifies one frame pair.
+    pub fn rectified(&self, pair: &FramePair) -> Result<(GrayImage, GrayImage)> {
+        let (l, r) = self.haul.load_pair(pair, Some((self.width, self.height)))?;
+        let out = self.rectifier.rectify_pair(&l, &r).map_err(|e| {
+            InputError::file(
+                &pair.left,
+                format!("frame {}: cannot rectify: {e:?}", pair.index),
+            )
+        })?;
+        Ok(out)
+    }
+}
+
+/// A new boxed default pipeline for `setup`.
+pub fn new_pipeline(setup: &Setup) -> Result<Box<DefaultPipeline>> {
+    let p = DefaultPipeline::new(setup.pipeline_config())
+        .map_err(|e| InputError::plain("pipeline configuration", format!("{e}")))?;
+    Ok(Box::new(p))
+}
+
+/// Runs `f` on image views of two rectified frames.
+pub fn views<'a>(l: &'a GrayImage, r: &'a GrayImage) -> Result<(ImageView<'a>, ImageView<'a>)> {
+    let lv = ImageView::packed(l.as_raw(), l.width() as usize, l.height() as usize)
+        .map_err(|e| anyhow::anyhow!("left view: {e:?}"))?;
+    let rv = ImageView::packed(r.as_raw(), r.width() as usize, r.height() as usize)
+        .map_err(|e| anyhow::anyhow!("right view: {e:?}"))?;
+    Ok((lv, rv))
+}
+
+/// A rectified upright box → `[x, y, w, h]` in the camera's raw pixels.
+pub fn raw_box(cam: &RectifiedCamera, b: &Roi) -> [f64; 4] {
+    // pixel indices x..x+w−1: outline x−½ .. x+w−½
+    let (x0, y0) = (b.x as f64 - 0.5, b.y as f64 - 0.5);
+    let (x1, y1) = (x0 + b.w as f64, y0 + b.h as f64);
+    let (a, c, d, e) = cam.rect_box_to_raw(x0, y0, x1, y1);
+    [a + 0.5, c + 0.5, (d - a).max(0.0), (e - c).max(0.0)]
+}
+
+/// A rectified-frame 3-D point → raw left camera frame.
+pub fn raw_point(rect: &Rectifier, p: &[f32; 3]) -> [f64; 3] {
+    let v = rect.rect.r1.transpose() * Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+    [v.x, v.y, v.z]
+}
+
+/// What one haul gave.
+#[derive(Debug, Clone)]
+pub struct HaulOutcome {
+    /// Fish counted.
+    pub fish: usize,
+    /// Fish with a length.
+    pub measured: usize,
+    /// Frames processed.
+    pub frames: u32,
+    /// Seconds spent per frame (all stages, read and rectify included).
+    pub seconds_per_frame: f64,
+}
+
+const STAGES: [&str; 7] = [
+    "read",
+    "rectify",
+    "segment_left",
+    "segment_right",
+    "pair",
+    "length",
+    "track",
+];
+
+fn stage_index(s: Stage) -> usize {
+    match s {
+        Stage::SegmentLeft => 2,
+        Stage::SegmentRight => 3,
+        Stage::Pair => 4,
+        Stage::Length => 5,
+        Stage::Track => 6,
+    }
+}
+
+/// Tracks one haul into `out` (created if needed).
+pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOutcome> {
+    let setup = prepare(dir, opts)?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("{}: cannot create the output directory", out.display()))?;
+    let mut pipe = new_pipeline(&setup)?;
+    let (w, h) = (setup.width as usize, setup.height as usize);
+    let mut ws = vec![0u8; DefaultPipeline::workspace_size(w, h)];
+    let mut events: Vec<PipelineEvent> = Vec::new();
+    let mut secs = [0.0f64; STAGES.len()];
+    let started = Instant::now();
+    for pair in &setup.haul.frames {
+        let t0 = Instant::now();
+        let (l, r) = setup
+            .haul
+            .load_pair(pair, Some((setup.width, setup.height)))?;
+        secs[0] += t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let (lr, rr) = setup.rectifier.rectify_pair(&l, &r).map_err(|e| {
+            InputError::file(
+                &pair.left,
+                format!("frame {}: cannot rectify: {e:?}", pair.index),
+            )
+        })?;
+        secs[1] += t1.elapsed().as_secs_f64();
+        let (lv, rv) = views(&lr, &rr)?;
+        let mut last = Instant::now();
+        pipe.process_frame(pair.index, lv, rv, &mut ws, &mut |e| {
+            if let PipelineEvent::StageDone { stage, .. } = e {
+                secs[stage_index(*stage)] += last.elapsed().as_secs_f64();
+                last = Instant::now();
+            } else {
+                events.push(*e);
+            }
+        })
+        .map_err(|e| {
+            InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
+        })?;
+    }
+    let t = Instant::now();
+    pipe.finish(&mut |e| events.push(*e));
+    secs[6] += t.elapsed().as_secs_f64();
+    let total = started.elapsed().as_secs_f64();
+    let stats = pipe.stats();
+    let frames = setup.haul.frames.len() as u32;
+    let written = write_outputs(&setup, out, &events, opts)?;
+    let timings: BTreeMap<&str, f64> = STAGES.iter().copied().zip(secs).collect();
+    write_summary(&setup, out, &written, &stats, &timings, total)?;
+    Ok(HaulOutcome {
+        fish: written.fish.len(),
+        measured: written
+            .fish
+            .iter()
+            .filter(|f| f.length_mm.is_some())
+            .count(),
+        frames,
+        seconds_per_frame: total / frames.max(1) as f64,
+    })
+}
+
+struct Written {
+    fish: Vec<FishOut>,
+    tracks: usize,
+    detections: usize,
+    stereo_rows: usize,
+    duplicates: usize,
+}
+
+fn write_outputs(
+    setup: &Setup,
+    out: &Path,
+    events: &[PipelineEvent],
+    _opts: &TrackOptions,
+) -> Result<Written> {
+    let rect = &setup.rectifier;
+    let mut dets = Vec::new();
+    let mut stereo = Vec::new();
+    let mut tracks = Vec::new();
+    let mut fish = Vec::new();
+    let mut duplicates = BTreeSet::new();
+    for e in events {
+        match *e {
+            PipelineEvent::Object {
+                frame,
+                bbox,
+                obb,
+                stereo: st,
+                ..
+            } => {
+                let lb = raw_box(&rect.left, &bbox);
+                let (c, s) = (obb.angle.cos() as f64, obb.angle.sin() as f64);
+                let hw = obb.half_w as f64;
+                let (cx, cy) = (obb.cx as f64, obb.cy as f64);
+                let a = rect.left.rect_to_raw(cx - hw * c, cy - hw * s);
+                let b = rect.left.rect_to_raw(cx + hw * c, cy + hw * s);
+                let len_px = ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
+                dets.push(DetectionRow {
+                    frame,
+                    bbox: lb,
+                    conf: 1.0,
+                    length_px: (len_px > 0.0).then_some(len_px),
+                });
+                let fl = st.and_then(|s| s.length);
+                stereo.push(StereoOut {
+                    frame,
+                    left: lb,
+                    right: st.map(|s| raw_box(&rect.right, &s.right_box)),
+                    head: fl.map(|l| raw_point(rect, &l.ends[0].xyz)),
+                    tail: fl.map(|l| raw_point(rect, &l.ends[1].xyz)),
+                    length_mm: fl.map(|l| l.length_mm as f64),
+                });
+            }
+            PipelineEvent::TrackFrame {
+                track,
+                frame,
+                obs,
+                bbox,
+                centre,
+            } => tracks.push(TrackRow {
+                frame,
+                id: track,
+                bbox: raw_box(&rect.left, &bbox),
+                conf: if obs.is_some() { 1.0 } else { 0.5 },
+                xyz: centre.map(|p| raw_point(rect, &p)),
+            }),
+            PipelineEvent::TrackClosed {
+                track,
+                reason,
+                first_frame,
+                last_frame,
+                frames,
+                length,
+                range_mm,
+                ..
+            } => {
+                if reason == CloseReason::Duplicate {
+                    duplicates.insert(track);
+                    continue;
+                }
+                fish.push(FishOut {
+                    track_id: track,
+                    first_frame,
+                    last_frame,
+                    frames,
+                    length_mm: length.median_mm.map(f64::from),
+                    length_sd_mm: length.median_mm.map(|_| length.robust_sd_mm as f64),
+                    range_mm: range_mm.map(f64::from),
+                });
+            }
+            PipelineEvent::StageDone { .. } | PipelineEvent::FrameDone { .. } => {}
+        }
+    }
+    tracks.retain(|r| !duplicates.contains(&r.id));
+    tracks.sort_by_key(|r| (r.frame, r.id));
+    fish.sort_by_key(|f| f.track_id);
+    let names: Vec<String> = setup.haul.frames.iter().map(|f| f.name.clone()).collect();
+    write_tracks(&out.join("tracks.csv"), &tracks)?;
+    write_fish(&out.join("fish.csv"), &fish)?;
+    write_detections(&out.join("detections.csv"), &dets)?;
+    write_viame(
+        &out.join("detections.viame.csv"),
+        &tracks,
+        &fish,
+        &names,
+        FPS,
+    )?;
+    write_stereo(&out.join("stereo.csv"), &stereo)?;
+    Ok(Written {
+        tracks: tracks.len(),
+        detections: dets.len(),
+        stereo_rows: stereo.len(),
+        duplicates: duplicates.len(),
+        fish,
+    })
+}
+
+fn write_summary(
+    setup: &Setup,
+    out: &Path,
+    w: &Written,
+    stats: &PipelineStats,
+    timings: &BTreeMap<&str, f64>,
+    total: f64,
+) -> Result<()> {
+    let mut lengths: Vec<f64> = w.fish.iter().filter_map(|f| f.length_mm).collect();
+    lengths.sort_by(|a, b| a.total_cmp(b));
+    let n = lengths.len();
+    let mean = if n > 0 {
+        lengths.iter().sum::<f64>() / n as f64
+    } else {
+        0.0
+    };
+    let sd = if n > 1 {
+        (lengths.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+    } else {
+        0.0
+    };
+    let median = match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(lengths[n / 2]),
+        _ => Some(0.5 * (lengths[n / 2 - 1] + lengths[n / 2])),
+    };
+    let frames = setup.haul.frames.len();
+    let per_frame: BTreeMap<&str, f64> = timings
+        .iter()
+        .map(|(k, v)| (*k, v * 1000.0 / frames.max(1) as f64))
+        .collect();
+    let t = &stats.track;
+    let summary = json!({
+        "haul": setup.haul.dir.display().to_string(),
+        "frames": frames,
+        "width": setup.width,
+        "height": setup.height,
+        "fish_count": w.fish.len(),
+        "fish_measured": n,
+        "length_mm": {
+            "count": n,
+            "mean": mean,
+            "sd": sd,
+            "median": median,
+            "min": lengths.first(),
+            "max": lengths.last(),
+        },
+        "rows": {
+            "tracks": w.tracks,
+            "detections": w.detections,
+            "stereo": w.stereo_rows,
+        },
+        "counts": {
+            "left_objects": stats.left_objects,
+            "right_objects": stats.right_objects,
+            "stereo_pairs": stats.pairs,
+            "pairs_measured": stats.measured,
+            "length_failed": stats.length_failed,
+            "tracks_born": t.targets_born,
+            "tracks_closed": t.tracks_closed,
+            "duplicate_tracks": w.duplicates,
+        },
+        "dropped": {
+            "left_objects": stats.left_objects_dropped,
+            "right_objects": stats.right_objects_dropped,
+            "observations": stats.observations_dropped,
+            "tracker_observations": t.obs_dropped,
+            "tracker_invalid_observations": t.obs_invalid,
+            "targets": t.targets_dropped,
+            "trellis_nodes": t.nodes_dropped,
+            "path_steps": t.path_steps_dropped,
+            "length_accumulators": stats.accumulators_dropped,
+            "track_lengths": stats.lengths_dropped,
+            "history_misses": stats.history_misses,
+        },
+        "timings_ms_per_frame": per_frame,
+        "timings_total_s": total,
+        "memory": {
+            "pipeline_bytes": std::mem::size_of::<DefaultPipeline>(),
+            "workspace_bytes": DefaultPipeline::workspace_size(setup.width as usize, setup.height as usize),
+        },
+        "params": setup.params,
+    });
+    write_json(&out.join("summary.json"), &summary)
+}
+
+/// `fishtrack track HAUL... --out OUT`.
+pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
+    if opts.overlays {
+        return Err(InputError::plain("--overlays", "overlays are not built yet").into());
+    }
+    if let Some(t) = &opts.tracker {
+        parse_tracker(t)?;
+    }
+    let many = hauls.len() > 1;
+    for h in hauls {
+        let dest = if many {
+            let name = h
+                .file_name()
+                .map(|n| n.to_owned())
+                .or_else(|| {
+                    h.canonicalize()
+                        .ok()
+                        .and_then(|p| p.file_name().map(|n| n.to_owned()))
+                })
+                .unwrap_or_else(|| "haul".into());
+            out.join(name)
+        } else {
+            out.to_path_buf()
+        };
+        let o = track_haul(h, &dest, opts)?;
+        println!(
+            "{}: {} frames, {} fish ({} measured), {:.2} s/frame → {}",
+            h.display(),
+            o.frames,
+            o.fish,
+            o.measured,
+            o.seconds_per_frame,
+            dest.display()
+        );
+    }
+    Ok(())
+}
