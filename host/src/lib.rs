@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod calib;
+pub mod detect;
 pub mod error;
 pub mod eval;
 pub mod haul;
