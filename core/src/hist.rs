@@ -76,6 +76,86 @@ pub fn ratio_backprojection_lut(h_high: &[u32], h_low: &[u32], theta_bp: f32) ->
     lut
 }
 
+/// Bin of grey level `v` in a `bins`-bin histogram spanning the grey-level
+/// range `[lo, hi]` of one local region (levels outside are clamped into
+/// the end bins): `(clamp(v, lo, hi) − lo) · bins / (hi − lo + 1)`.
+///
+/// Why a local range (Section III.B): the ratio histogram can only tell a
+/// fish from its background when their grey levels fall in different
+/// bins. With 16 bins over the whole 0..=255 scale a bin is 16 levels wide,
+/// wider than the whole contrast of a dim fish in dark water (fish 23 over
+/// background 16, noise σ ≈ 2.5 on the synthetic hauls), so fish and
+/// background share bins and the backprojection floods the ellipse. Spanning
+/// the bins over the region's own range — from ⌊τ_low⌋ (everything at or
+/// below it is background to eq. (1)) to its 99th percentile (robust to
+/// marine-snow specks) — keeps the paper's bin count and makes a bin a
+/// fixed fraction of the local contrast, as OpenCV's `calcHist` does with
+/// `ranges = [lo, hi + 1]`.
+#[inline]
+pub const fn range_bin(v: u8, lo: u8, hi: u8, bins: usize) -> usize {
+    let (lo, hi) = if hi < lo { (lo, lo) } else { (lo, hi) };
+    let v = if v < lo {
+        lo
+    } else if v > hi {
+        hi
+    } else {
+        v
+    };
+    let span = (hi - lo) as usize + 1;
+    (v - lo) as usize * bins / span
+}
+
+/// Smallest grey level at or below which at least `pct`% of the
+/// histogram's pixels lie (255 for an empty histogram).
+pub fn percentile_256(hist: &[u32; 256], pct: u32) -> u8 {
+    let total: u64 = hist.iter().map(|&h| h as u64).sum();
+    let need = (total * pct.min(100) as u64).div_ceil(100);
+    let mut acc = 0u64;
+    for (v, &h) in hist.iter().enumerate() {
+        acc += h as u64;
+        if acc >= need && acc > 0 {
+            return v as u8;
+        }
+    }
+    255
+}
+
+/// [`fold_bins`] with the bins spanning `[lo, hi]` ([`range_bin`]).
+pub fn fold_bins_range(hist: &[u32; 256], lo: u8, hi: u8, out: &mut [u32]) {
+    out.fill(0);
+    let bins = out.len();
+    for (v, &h) in hist.iter().enumerate() {
+        if let Some(o) = out.get_mut(range_bin(v as u8, lo, hi, bins)) {
+            *o = o.wrapping_add(h);
+        }
+    }
+}
+
+/// [`ratio_backprojection_lut`] with the bins spanning `[lo, hi]`
+/// ([`range_bin`]); `h_high` and `h_low` have the same length.
+pub fn ratio_backprojection_lut_range(
+    h_high: &[u32],
+    h_low: &[u32],
+    lo: u8,
+    hi: u8,
+    theta_bp: f32,
+) -> [bool; 256] {
+    let mut lut = [false; 256];
+    let bins = h_low.len().min(h_high.len());
+    for (v, l) in lut.iter_mut().enumerate() {
+        let b = range_bin(v as u8, lo, hi, bins);
+        let (hh, hl) = match (h_high.get(b), h_low.get(b)) {
+            (Some(&hh), Some(&hl)) => (hh, hl),
+            _ => continue,
+        };
+        if hl == 0 {
+            continue;
+        }
+        *l = (hh as f32 / hl as f32).min(1.0) > theta_bp;
+    }
+    lut
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -111,5 +191,24 @@ mod tests {
         assert!(lut[8 * 16] && lut[8 * 16 + 15]);
         assert!(!lut[9 * 16]);
         assert!(!lut[0] && !lut[255]);
+    }
+
+    #[test]
+    fn range_bins_follow_calc_hist_ranges() {
+        // calcHist(ranges = [10, 26]) with 16 bins: one level per bin
+        assert_eq!(range_bin(10, 10, 25, 16), 0);
+        assert_eq!(range_bin(25, 10, 25, 16), 15);
+        assert_eq!(range_bin(17, 10, 25, 16), 7);
+        // clamped ends, degenerate range
+        assert_eq!(range_bin(0, 10, 25, 16), 0);
+        assert_eq!(range_bin(255, 10, 25, 16), 15);
+        assert_eq!(range_bin(200, 30, 20, 16), 0);
+        let mut h = [0u32; 256];
+        for v in 0..100u8 {
+            add_row_256(&mut h, &[v]);
+        }
+        assert_eq!(percentile_256(&h, 99), 98);
+        assert_eq!(percentile_256(&h, 50), 49);
+        assert_eq!(percentile_256(&[0; 256], 99), 255);
     }
 }

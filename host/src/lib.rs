@@ -9,6 +9,7 @@
 pub mod calib;
 pub mod compare_cmd;
 pub mod demo_cmd;
+pub mod detect;
 pub mod error;
 pub mod eval;
 pub mod haul;

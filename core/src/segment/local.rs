@@ -12,8 +12,10 @@
 //! - Both masks get the 3 × 3 median (replicated ROI border, as
 //!   `cv2.medianBlur`), then are restricted to the ellipse again.
 //! - `H_low`, `H_high`: `hist_bins`-bin histograms of the pixels under the
-//!   two masks; the ratio histogram of eq. (2) backprojected on the
-//!   ellipse and thresholded by θ_bp, eq. (3), gives B.
+//!   two masks, the bins spanning the region's grey-level range
+//!   `[⌊τ_low⌋, p99]` ([`crate::hist::range_bin`]: levels outside are
+//!   clamped into the end bins); the ratio histogram of eq. (2)
+//!   backprojected on the ellipse and thresholded by θ_bp, eq. (3), gives B.
 //!   Ablations: `double_threshold = false` → B = median(M_τ);
 //!   `backprojection = false` → B = median(M_high).
 //! - Components of B (8-connected): eq. (4) keeps `area_min ≤ A ≤ area_max`,
@@ -28,13 +30,17 @@
 
 use super::workspace::{RoiBufs, STAT_WORDS};
 use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
-use crate::hist::{bin_of, fold_bins, ratio_backprojection_lut};
+use crate::hist::{bin_of, fold_bins_range, percentile_256, ratio_backprojection_lut_range};
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
 use crate::morph::{close_disk_in_place, median3_binary, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
 use crate::threshold::{lower_class_mean, otsu, shifted_threshold};
+
+/// Upper end of the backprojection histograms' grey-level range: this
+/// percentile of the ellipse's pixels ([`crate::hist::range_bin`]).
+pub const BP_RANGE_PERCENTILE: u32 = 99;
 
 /// Bounding box (clipped to the frame) of an ellipse.
 pub fn ellipse_roi(r: &Region, width: usize, height: usize) -> Roi {
@@ -215,9 +221,11 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         }
         let bins = (params.hist_bins as usize).clamp(1, 256);
         let (mut bl, mut bh) = ([0u32; 256], [0u32; 256]);
-        fold_bins(&hl, &mut bl[..bins]);
-        fold_bins(&hh, &mut bh[..bins]);
-        let lut = ratio_backprojection_lut(&bh[..bins], &bl[..bins], params.theta_bp);
+        // bins over the region's range [⌊τ_low⌋, p99] (crate::hist::range_bin)
+        let (lo, hi) = (t_low, percentile_256(&h256, BP_RANGE_PERCENTILE).max(t_low));
+        fold_bins_range(&hl, lo, hi, &mut bl[..bins]);
+        fold_bins_range(&hh, lo, hi, &mut bh[..bins]);
+        let lut = ratio_backprojection_lut_range(&bh[..bins], &bl[..bins], lo, hi, params.theta_bp);
         for (j, sp) in spans.iter().enumerate() {
             let row = pv.row(j);
             for (i, &p) in row.iter().enumerate().take(rw) {

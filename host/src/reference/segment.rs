@@ -350,10 +350,18 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         // eq. (2)–(3)
         let bmask = if p.double_threshold && p.backprojection {
             let bins = p.hist_bins as usize;
+            // bins spanning [⌊τ_low⌋, 99th percentile of the ellipse]
+            let mut sorted = vals.clone();
+            sorted.sort_unstable();
+            let need = (sorted.len() * 99).div_ceil(100).max(1);
+            let lo = t_low.floor().clamp(0.0, 255.0) as usize;
+            let hi = (sorted[need - 1] as usize).max(lo);
+            let bin_of =
+                |v: u8| (v as usize).clamp(lo, hi).saturating_sub(lo) * bins / (hi - lo + 1);
             let (mut hl, mut hh) = (vec![0f64; bins], vec![0f64; bins]);
             for i in 0..rw * rh {
                 let (x, y) = (i % rw, i / rw);
-                let bin = at(i) as usize * bins / 256;
+                let bin = bin_of(at(i));
                 if m_low.get_pixel(x, y).0[0] > 0 {
                     hl[bin] += 1.0;
                 }
@@ -368,7 +376,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 .collect();
             GrayImage::from_fn(rw, rh, |x, y| {
                 let i = y * rw + x;
-                let bp = ratio[at(i) as usize * bins / 256];
+                let bp = ratio[bin_of(at(i))];
                 Luma([if ins[i as usize] && bp > p.theta_bp as f64 {
                     255
                 } else {

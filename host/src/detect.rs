@@ -1,0 +1,120 @@
+//! Segmentation-only detection over a haul (Section III, Fig. 2): every
+//! left frame is rectified, segmented by the core's
+//! [`segment_frame`](fishtrack_core::segment::segment_frame), and its
+//! objects are written to `OUT/detections.csv` (MOT rows, id −1, upright
+//! boxes in raw left pixels, 11th column the oriented PCA length in raw
+//! left pixels). `fishtrack eval` then scores segmentation precision/recall
+//! and the single-camera length of large targets (paper Section V.A);
+//! `host/examples/seg_eval.rs` runs both.
+//!
+//! The oriented length is `2·half_w` of the object's PCA box, measured in
+//! the raw image: the two end points of the box's first axis are mapped
+//! back through the rectification ([`RectifiedCamera::rect_to_raw`]) and
+//! their distance taken, so lens distortion does not bias it.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use fishtrack_core::image::ImageView;
+use fishtrack_core::object::Objects;
+use fishtrack_core::params::Params;
+use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI_PIXELS};
+
+use crate::calib::StereoCalib;
+use crate::haul::Haul;
+use crate::output::{write_detections, DetectionRow};
+use crate::rectify::{FixedMap, RectifiedCamera, Rectifier};
+
+/// Object capacity per frame (issue 4's recommended `Objects<64, 16384>`).
+pub const MAX_OBJECTS: usize = 64;
+/// Mask-run capacity per frame.
+pub const MAX_RUNS: usize = 16384;
+
+/// Counters over one [`detect_haul`] run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DetectSummary {
+    /// Frames processed.
+    pub frames: u32,
+    /// Objects written.
+    pub objects: u64,
+    /// Objects dropped by capacity.
+    pub dropped: u64,
+}
+
+/// Loads the haul's calibration (any supported layout; the first frame's
+/// size stands in where the layout records none).
+pub fn load_calibration(haul: &Haul) -> Result<StereoCalib> {
+    haul.calibration()?;
+    let size = match haul.frames.first() {
+        Some(p) => {
+            let (l, _) = haul.load_pair(p, None)?;
+            Some(l.dimensions())
+        }
+        None => None,
+    };
+    Ok(StereoCalib::load(&haul.dir, size)?)
+}
+
+/// The raw-left detection rows of one rectified left frame's objects.
+pub fn detection_rows<const N: usize, const R: usize>(
+    frame: u32,
+    objs: &Objects<N, R>,
+    cam: &RectifiedCamera,
+) -> Vec<DetectionRow> {
+    let mut rows = Vec::with_capacity(objs.items.len());
+    for o in objs.items.iter() {
+        let b = o.bbox;
+        // pixel-edge box: pixel x covers [x − 0.5, x + 0.5]
+        let (x0, y0, x1, y1) = cam.rect_box_to_raw(
+            b.x as f64 - 0.5,
+            b.y as f64 - 0.5,
+            b.right() as f64 - 0.5,
+            b.bottom() as f64 - 0.5,
+        );
+        let ob = &o.obb;
+        let (c, s) = ((ob.angle as f64).cos(), (ob.angle as f64).sin());
+        let hw = ob.half_w as f64;
+        let (cx, cy) = (ob.cx as f64, ob.cy as f64);
+        let p = cam.rect_to_raw(cx + hw * c, cy + hw * s);
+        let q = cam.rect_to_raw(cx - hw * c, cy - hw * s);
+        let len = ((p.0 - q.0).powi(2) + (p.1 - q.1).powi(2)).sqrt();
+        rows.push(DetectionRow {
+            frame,
+            bbox: [x0, y0, x1 - x0, y1 - y0],
+            conf: 1.0,
+            length_px: len.is_finite().then_some(len),
+        });
+    }
+    rows
+}
+
+/// Segments every left frame of `haul_dir` with `params` (already scaled to
+/// the frame size) and writes `out_dir/detections.csv`.
+pub fn detect_haul(haul_dir: &Path, params: &Params, out_dir: &Path) -> Result<DetectSummary> {
+    let haul = Haul::open(haul_dir)?;
+    let calib = load_calibration(&haul)?;
+    let (w, h) = (calib.width as usize, calib.height as usize);
+    let rect = Rectifier::new(&calib);
+    let left_map: &FixedMap = &rect.left_map;
+    let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
+    let mut objs: Box<Objects<MAX_OBJECTS, MAX_RUNS>> = Box::default();
+    let mut rows = Vec::new();
+    let mut sum = DetectSummary::default();
+    for pair in &haul.frames {
+        let (left, _) = haul.load_pair(pair, Some((calib.width, calib.height)))?;
+        let rl = left_map
+            .apply(&left)
+            .with_context(|| format!("rectifying frame {}", pair.index))?;
+        let view = ImageView::packed(rl.as_raw(), w, h)
+            .map_err(|e| anyhow::anyhow!("frame {}: {e}", pair.index))?;
+        let st = segment_frame(view, params, &mut ws, &mut objs)
+            .map_err(|e| anyhow::anyhow!("frame {}: {e}", pair.index))?;
+        sum.frames += 1;
+        sum.objects += objs.items.len() as u64;
+        sum.dropped += st.dropped as u64;
+        rows.extend(detection_rows(pair.index, &objs, &rect.left));
+    }
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    write_detections(&out_dir.join("detections.csv"), &rows)?;
+    Ok(sum)
+}
