@@ -19,5 +19,6 @@ pub mod reference_track;
 pub mod synth;
 pub mod timing;
 pub mod truth;
+pub mod truth_obs;
 
 pub use error::InputError;

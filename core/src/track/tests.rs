@@ -297,7 +297,7 @@ proptest! {
     fn random_observations_never_panic(
         frames in proptest::collection::vec(proptest::collection::vec(arb_obs(), 0..12), 1..25),
         assoc in prop_oneof![Just(Assoc::Viterbi), Just(Assoc::Mc), Just(Assoc::Nn)],
-        cues in 0u8..16,
+        cues in 0u8..32,
     ) {
         let mut cfg = TrackConfig::for_frame(W, W);
         cfg.cues = Cues(cues);
