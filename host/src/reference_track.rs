@@ -597,7 +597,8 @@ pub fn run(
                 || y0 < mu
                 || x1.saturating_add(mu) > cfg.width
                 || y1.saturating_add(mu) > cfg.height;
-            if !near && c.area < big {
+            // In the first frame every fish is already inside the view.
+            if fi > 0 && !near && c.area < big {
                 continue;
             }
             if targets.len() >= cap.targets {

@@ -58,7 +58,10 @@
 //! close to the video frame border … false alarms … areas are usually
 //! small"): its left box lies within M of a border, *or* its left area is at
 //! least `birth_area_factor` · θ_A^L. Other unassociated observations are
-//! rejected as false alarms. The birth and death rules are the same for all
+//! rejected as false alarms. In the first frame of a haul (the first
+//! [`Tracker::step`] after [`Tracker::new`] or [`Tracker::finish`]) every
+//! unassociated observation is a new target: the fish already in view did
+//! not enter through a border (our addition). The birth and death rules are the same for all
 //! three association methods.
 //!
 //! # Events
@@ -109,8 +112,9 @@ pub struct TrackConfig {
     /// Cost of a lost frame (the predicted node's edge). Default 24.
     pub miss_cost: f32,
     /// Extra cost of a Viterbi node whose observation is already the best
-    /// node of an earlier (older) target this frame. Default 12
-    /// (`miss_cost` / 2).
+    /// node of an earlier (older) target this frame. Default 24
+    /// (= `miss_cost`; measured on synthetic hauls: 12 → 24 raised success
+    /// 0.465 → 0.478 at 5 fps, 48 gave no more).
     pub share_cost: f32,
     /// Edges costing this much or more are not considered. Default 48.
     pub gate_cost: f32,
@@ -145,7 +149,7 @@ impl TrackConfig {
             height,
             cues: Cues::ALL,
             miss_cost: 24.0,
-            share_cost: 12.0,
+            share_cost: 24.0,
             gate_cost: 48.0,
             nn_gate: 6.0,
             max_lost: 1,
@@ -541,6 +545,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         sink: &mut S,
     ) -> Result<(), TrackError> {
         params.validate()?;
+        let first_frame = self.last_frame.is_none();
         if let Some(last) = self.last_frame {
             if frame <= last {
                 return Err(TrackError::FrameOrder { last, got: frame });
@@ -565,7 +570,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
             self.drop_duplicates(sink);
         }
         self.targets.retain(|t| t.closing.is_none());
-        self.births(frame, params);
+        self.births(frame, params, first_frame);
         Ok(())
     }
 
@@ -815,7 +820,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
     }
 
     /// New targets from unassociated observations (see the module docs).
-    fn births(&mut self, frame: u32, params: &Params) {
+    fn births(&mut self, frame: u32, params: &Params, first_frame: bool) {
         let (w, h, m) = (self.cfg.width, self.cfg.height, params.margin);
         let big = self.cfg.birth_area_factor * params.area_min as f32;
         for c in self.cands.iter() {
@@ -827,7 +832,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 || b.y < m
                 || b.right().saturating_add(m) > w
                 || b.bottom().saturating_add(m) > h;
-            if !near_border && (c.area as f32) < big {
+            if !first_frame && !near_border && (c.area as f32) < big {
                 continue;
             }
             let s = NodeState {
