@@ -23,5 +23,6 @@ pub mod synth;
 pub mod timing;
 pub mod track_cmd;
 pub mod truth;
+pub mod truth_obs;
 
 pub use error::InputError;

@@ -4,7 +4,7 @@
 //!
 //! What must match the core exactly (the rules, not the code): cue
 //! definitions and σ estimation (last 128 chosen-edge samples per cue,
-//! median rank ⌊n/2⌋ / 0.4549, clamped to [default/16, 16·default], after
+//! median rank ⌊n/2⌋ / 0.4549, clamped to [default, 16·default], after
 //! `min_sigma_samples`); the candidate gate; K − 1 cheapest real nodes plus
 //! one predicted node per stage; commit of the oldest stage along the best
 //! path with pruning at depth D; births (border margin or large area) and
@@ -116,6 +116,7 @@ pub fn compare(a: &[Assignment], b: &[Assignment]) -> Agreement {
 struct View {
     pos: [f64; 2],
     area: f64,
+    cut: bool,
     cdf: Option<[f64; 15]>,
 }
 
@@ -161,6 +162,7 @@ struct Sig {
     a: Vec<f64>,
     m: Vec<f64>,
     h: Vec<f64>,
+    d: Vec<f64>,
     vx: Vec<f64>,
     vy: Vec<f64>,
 }
@@ -186,11 +188,11 @@ fn median(v: &[f64], min: usize) -> Option<f64> {
 }
 
 struct Costs {
-    s: [f64; 5], // v v0 a m h
+    s: [f64; 6], // v v0 a m h d
     cues: u8,
-    v_ref: [f64; 2],
     v_init: [f64; 2],
     z_ref: f64,
+    cap: f64,
 }
 
 struct Feat {
@@ -198,6 +200,7 @@ struct Feat {
     a2: f64,
     m2: f64,
     h2: f64,
+    z2: f64,
 }
 
 fn cdf(h: &[u32; 16]) -> Option<[f64; 15]> {
@@ -214,29 +217,43 @@ fn cdf(h: &[u32; 16]) -> Option<[f64; 15]> {
     Some(c)
 }
 
-fn feat(p: &View, pred: [f64; 2], c: &View, depths: (Option<f64>, Option<f64>), k: &Costs) -> Feat {
+fn feat(
+    p: &View,
+    pred: [f64; 2],
+    c: &View,
+    depths: (Option<f64>, Option<f64>),
+    v_ref: [f64; 2],
+    k: &Costs,
+) -> Feat {
     let norm = |a: f64, z: Option<f64>| match (depths, z) {
         ((Some(_), Some(_)), Some(z)) => a * (z / k.z_ref).powi(2),
         _ => a,
     };
     let an = norm(p.area, depths.0);
     let bn = norm(c.area, depths.1);
-    let rel = if an + bn > 0.0 {
+    // A border-cut view's area is a lower bound: no penalty when it is the smaller.
+    let cut_smaller = (p.cut && an < bn) || (c.cut && bn < an);
+    let rel = if an + bn > 0.0 && !cut_smaller {
         2.0 * (an - bn).abs() / (an + bn)
     } else {
         0.0
     };
     let v = [c.pos[0] - p.pos[0], c.pos[1] - p.pos[1]];
-    let th = if v[0] * v[0] + v[1] * v[1] < 1.0 {
+    let th = if v[0] * v[0] + v[1] * v[1] < 1.0 || v_ref == [0.0, 0.0] {
         0.0
     } else {
         // Angle between v and v_ref by the cosine formula, eq. (7).
-        let cos = (v[0] * k.v_ref[0] + v[1] * k.v_ref[1])
-            / (v[0].hypot(v[1]) * k.v_ref[0].hypot(k.v_ref[1]));
+        let cos =
+            (v[0] * v_ref[0] + v[1] * v_ref[1]) / (v[0].hypot(v[1]) * v_ref[0].hypot(v_ref[1]));
         cos.clamp(-1.0, 1.0).acos()
     };
     let emd = match (&p.cdf, &c.cdf) {
         (Some(a), Some(b)) => a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum(),
+        _ => 0.0,
+    };
+    // Relative stereo depth change (our fifth cue).
+    let dz = match depths {
+        (Some(a), Some(b)) if a + b > 0.0 => 2.0 * (a - b).abs() / (a + b),
         _ => 0.0,
     };
     Feat {
@@ -244,24 +261,24 @@ fn feat(p: &View, pred: [f64; 2], c: &View, depths: (Option<f64>, Option<f64>), 
         a2: rel * rel,
         m2: th * th,
         h2: emd * emd,
+        z2: dz * dz,
     }
 }
 
 fn cam_cost(f: &Feat, k: &Costs, first: bool) -> f64 {
-    let mut c = 0.0;
-    if k.cues & 1 != 0 {
-        c += f.d2 / if first { k.s[1] } else { k.s[0] };
-    }
-    if k.cues & 2 != 0 {
-        c += f.a2 / k.s[2];
-    }
-    if k.cues & 4 != 0 {
-        c += f.m2 / k.s[3];
-    }
-    if k.cues & 8 != 0 {
-        c += f.h2 / k.s[4];
-    }
-    c
+    // Each cue's term capped at cue_cap (robust eq. 9).
+    let terms = [
+        (1, f.d2 / if first { k.s[1] } else { k.s[0] }),
+        (2, f.a2 / k.s[2]),
+        (4, f.m2 / k.s[3]),
+        (8, f.h2 / k.s[4]),
+        (16, f.z2 / k.s[5]),
+    ];
+    terms
+        .iter()
+        .filter(|(bit, _)| k.cues & bit != 0)
+        .map(|&(_, z)| z.min(k.cap))
+        .sum()
 }
 
 /// Stereo edge: (cost, left features, right features).
@@ -269,17 +286,20 @@ fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
     let first = !p.vel_known;
     let v = if first { k.v_init } else { p.vel };
     let d = (p.depth, c.depth);
+    // Direction reference: the target's own velocity; none in its first frame.
+    let v_ref = if p.vel_known { p.vel } else { [0.0, 0.0] };
     let fl = feat(
         &p.left,
         [p.left.pos[0] + v[0], p.left.pos[1] + v[1]],
         &c.left,
         d,
+        v_ref,
         k,
     );
     let cl = cam_cost(&fl, k, first);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let fr = feat(pr, [pr.pos[0] + v[0], pr.pos[1] + v[1]], cr, d, k);
+            let fr = feat(pr, [pr.pos[0] + v[0], pr.pos[1] + v[1]], cr, d, v_ref, k);
             let cr_ = cam_cost(&fr, k, first);
             (cl + cr_, fl, Some(fr))
         }
@@ -306,6 +326,7 @@ pub fn run(
         d0.a as f64,
         d0.m as f64,
         d0.h as f64,
+        d0.d as f64,
     ];
     let min = cfg.min_sigma_samples as usize;
     let alpha = p.alpha as f64;
@@ -318,6 +339,14 @@ pub fn run(
         let view = |v: &fishtrack_core::track::CameraView| View {
             pos: [v.cx as f64, v.cy as f64],
             area: v.area as f64,
+            cut: {
+                let b = &v.bbox;
+                let (w, h) = (cfg.width as u64, cfg.height as u64);
+                b.x <= 2
+                    || b.y <= 2
+                    || b.x as u64 + b.w as u64 + 2 >= w
+                    || b.y as u64 + b.h as u64 + 2 >= h
+            },
             cdf: cdf(&v.hist),
         };
         let cands: Vec<Cand> = obs
@@ -339,13 +368,11 @@ pub fn run(
                 area: o.left.area as f64,
             })
             .collect();
-        let lists = [&sig.v, &sig.v0, &sig.a, &sig.m, &sig.h];
-        let mut s = [0.0; 5];
-        for i in 0..5 {
+        let lists = [&sig.v, &sig.v0, &sig.a, &sig.m, &sig.h, &sig.d];
+        let mut s = [0.0; 6];
+        for i in 0..6 {
             s[i] = match median(lists[i], min) {
-                Some(x) => {
-                    (x / 0.454_936_4f32 as f64).clamp(defaults[i] / 16.0, defaults[i] * 16.0)
-                }
+                Some(x) => (x / 0.454_936_4f32 as f64).clamp(defaults[i], defaults[i] * 16.0),
                 None => defaults[i],
             };
         }
@@ -356,9 +383,9 @@ pub fn run(
         let k = Costs {
             s,
             cues: cfg.cues.0,
-            v_ref: [p.v_ref_x as f64, p.v_ref_y as f64],
             v_init,
             z_ref: cfg.z_ref_mm as f64,
+            cap: cfg.cue_cap as f64,
         };
         let mut taken = vec![false; obs.len()];
 
@@ -447,11 +474,17 @@ pub fn run(
             if p.tracker == Assoc::Viterbi {
                 let mut real: Vec<(f64, usize, usize)> = Vec::new(); // (C, cand, pred)
                 for (ci, c) in cands.iter().enumerate() {
+                    // Node already on an older target's best path: share cost.
+                    let share = if taken[c.obs] {
+                        cfg.share_cost as f64
+                    } else {
+                        0.0
+                    };
                     let mut best: Option<(f64, usize)> = None;
                     for (i, st) in t.front.iter().enumerate() {
                         let (e, _, _) = edge(st, c, &k);
-                        if e < gate && best.is_none_or(|b| st.cost + e < b.0) {
-                            best = Some((st.cost + e, i));
+                        if e < gate && best.is_none_or(|b| st.cost + e + share < b.0) {
+                            best = Some((st.cost + e + share, i));
                         }
                     }
                     if let Some((acc, i)) = best {
@@ -499,6 +532,7 @@ pub fn run(
                     push(&mut sig.a, f.a2);
                     push(&mut sig.m, f.m2);
                     push(&mut sig.h, f.h2);
+                    push(&mut sig.d, f.z2);
                 }
                 push(&mut sig.vx, c.left.pos[0] - pst.left.pos[0]);
                 push(&mut sig.vy, c.left.pos[1] - pst.left.pos[1]);
@@ -563,7 +597,8 @@ pub fn run(
                 || y0 < mu
                 || x1.saturating_add(mu) > cfg.width
                 || y1.saturating_add(mu) > cfg.height;
-            if !near && c.area < big {
+            // In the first frame every fish is already inside the view.
+            if fi > 0 && !near && c.area < big {
                 continue;
             }
             if targets.len() >= cap.targets {

@@ -9,15 +9,20 @@
 //! ring. At the start of a frame, a cue with at least `min_samples` values
 //! gets the robust variance σ² = median(f²) / 0.4549 (0.4549 = median of
 //! χ²₁, so σ² is the variance of a Gaussian feature), clamped to
-//! [default/16, 16·default] so a run of junk cannot collapse or blow up the
-//! scale; below `min_samples` the default holds. σ² is fixed during a frame.
+//! [default, 16·default]; below `min_samples` the default holds. The floor
+//! is the default (it was default/16): the samples are the *accepted*
+//! edges, truncated by the gate and by the choice itself, so they
+//! underestimate the spread — on synthetic hauls the estimate shrank σ and
+//! the tracker then broke true links (success 0.40 vs 0.51 with the
+//! default floor). The data can widen a cue (e.g. at 2.5 fps), not narrow
+//! it below its default. σ² is fixed during a frame.
 //! The median is the element of rank ⌊n/2⌋ of the window.
 //!
 //! The same rings estimate `v_init`, the velocity a newborn target is
 //! projected with: the component-wise median displacement of accepted
 //! edges (0 until `min_samples`).
 //!
-//! Memory: 7 rings of [`WINDOW`] f32 (3.6 KiB).
+//! Memory: 8 rings of [`WINDOW`] f32 (3.6 KiB).
 
 use super::cost::{EdgeFeatures, Sigmas};
 
@@ -76,6 +81,7 @@ pub struct SigmaEstimator {
     a: Ring,
     m: Ring,
     h: Ring,
+    d: Ring,
     vx: Ring,
     vy: Ring,
 }
@@ -95,6 +101,7 @@ impl SigmaEstimator {
             a: Ring::new(),
             m: Ring::new(),
             h: Ring::new(),
+            d: Ring::new(),
             vx: Ring::new(),
             vy: Ring::new(),
         }
@@ -111,6 +118,7 @@ impl SigmaEstimator {
         self.a.push(f.a2);
         self.m.push(f.m2);
         self.h.push(f.h2);
+        self.d.push(f.z2);
     }
 
     /// Adds the (left) displacement of an accepted edge.
@@ -122,7 +130,7 @@ impl SigmaEstimator {
     /// Current σ² (see the module documentation).
     pub fn sigmas(&self, defaults: &Sigmas, min_samples: usize) -> Sigmas {
         let est = |r: &Ring, d: f32| match r.median(min_samples) {
-            Some(m) => (m / MEDIAN_CHI2_1).clamp(d / 16.0, d * 16.0),
+            Some(m) => (m / MEDIAN_CHI2_1).clamp(d, d * 16.0),
             None => d,
         };
         Sigmas {
@@ -131,6 +139,7 @@ impl SigmaEstimator {
             a: est(&self.a, defaults.a),
             m: est(&self.m, defaults.m),
             h: est(&self.h, defaults.h),
+            d: est(&self.d, defaults.d),
         }
     }
 
@@ -152,7 +161,7 @@ mod tests {
     fn median_estimate_recovers_gaussian_variance() {
         // Deterministic "Gaussian" squares: quantiles of N(0, 100²).
         let mut e = SigmaEstimator::new();
-        let d = Sigmas::for_frame(2048);
+        let d = Sigmas::for_frame(256);
         for i in 0..WINDOW {
             // Inverse-CDF-free approximation: f = 10·(rank-based quantile).
             let p = (i as f32 + 0.5) / WINDOW as f32;
@@ -175,6 +184,7 @@ mod tests {
                     a2: 0.0,
                     m2: 0.0,
                     h2: 0.0,
+                    z2: 0.0,
                 },
                 false,
             );
@@ -183,8 +193,8 @@ mod tests {
         assert!((s.v - 10_000.0).abs() < 500.0, "{}", s.v);
         // Too few samples: defaults.
         assert_eq!(s.v0, d.v0);
-        // Clamp at default/16 for an all-zero cue.
-        assert_eq!(s.a, d.a / 16.0);
+        // Floor at the default for an all-zero cue.
+        assert_eq!(s.a, d.a);
     }
 
     #[test]

@@ -278,6 +278,7 @@ pub fn view_feat(pos: [f32; 2], area: u32, cdf: Option<Cdf>) -> ViewFeat {
     ViewFeat {
         pos,
         area: area as f32,
+        cut: false,
         cdf,
     }
 }
