@@ -414,13 +414,13 @@ pub(crate) fn emit<const N: usize, const R: usize>(
         }
     }
     let (um, vm) = (0.5 * (umin + umax), 0.5 * (vmin + vmax));
-    let obb = OrientedBox {
+    let obb = long_axis_first(OrientedBox {
         cx: cx + um * c - vm * s,
         cy: cy + um * s + vm * c,
         half_w: 0.5 * (umax - umin),
         half_h: 0.5 * (vmax - vmin),
         angle,
-    };
+    });
     let n = m.area as f64;
     let mean = cand.sum as f64 / n;
     let variance = if m.area > 1 {
@@ -447,3 +447,24 @@ pub(crate) fn emit<const N: usize, const R: usize>(
 
 #[cfg(test)]
 mod tests;
+
+/// Makes the box's first axis the longer one (Fig. 3: the width w_o is the
+/// fish's length). The variance-maximising PCA axis of a near-round or
+/// oddly shaped mask can have the smaller extent; then the extents are
+/// swapped and the angle turned by 90°, kept in `(-π/2, π/2]`.
+pub(crate) fn long_axis_first(b: OrientedBox) -> OrientedBox {
+    if b.half_w >= b.half_h {
+        return b;
+    }
+    let half_pi = core::f32::consts::FRAC_PI_2;
+    let mut angle = b.angle + half_pi;
+    if angle > half_pi {
+        angle -= core::f32::consts::PI;
+    }
+    OrientedBox {
+        half_w: b.half_h,
+        half_h: b.half_w,
+        angle,
+        ..b
+    }
+}

@@ -230,13 +230,20 @@ fn oriented_box(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
         }
     }
     let (um, vm) = (0.5 * (umin + umax), 0.5 * (vmin + vmax));
-    (
-        mx + um * c - vm * s,
-        my + um * s + vm * c,
-        0.5 * (umax - umin),
-        0.5 * (vmax - vmin),
-        angle,
-    )
+    let (hw, hh) = (0.5 * (umax - umin), 0.5 * (vmax - vmin));
+    let (cx, cy) = (mx + um * c - vm * s, my + um * s + vm * c);
+    if hw >= hh {
+        (cx, cy, hw, hh, angle)
+    } else {
+        // the longer extent is the width (Fig. 3); turn the angle by 90°
+        let a = angle + std::f64::consts::FRAC_PI_2;
+        let a = if a > std::f64::consts::FRAC_PI_2 {
+            a - std::f64::consts::PI
+        } else {
+            a
+        };
+        (cx, cy, hh, hw, a)
+    }
 }
 
 /// Segments one frame.
