@@ -342,6 +342,8 @@ mod tests {
     }
 
     proptest! {
+        // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         #[test]
         fn roi_intersection_is_inside_both(a in (0u32..100, 0u32..100, 0u32..50, 0u32..50), b in (0u32..100, 0u32..100, 0u32..50, 0u32..50)) {
             let ra = Roi::new(a.0, a.1, a.2, a.3);

@@ -770,6 +770,8 @@ mod tests {
     }
 
     proptest! {
+        // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         #[test]
         fn label_components_equals_flood_fill(w in 1usize..40, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
             let mask = random_mask(w, h, seed, density);

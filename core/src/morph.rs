@@ -533,6 +533,8 @@ mod tests {
     }
 
     proptest! {
+        // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         #[test]
         fn disk_ops_equal_naive(w in 1usize..24, h in 1usize..24, size in prop::sample::select(vec![1u8, 3, 5, 7, 9]), seed in any::<u64>()) {
             let mut s = seed;

@@ -857,6 +857,8 @@ mod tests {
     }
 
     proptest! {
+        // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         /// Cross-pin timing on a fake clock: every frame has all six edges,
         /// both triggers rise together, the strobe covers the exposure of
         /// both cameras, and the frame period is exact.

@@ -145,6 +145,8 @@ mod tests {
     }
 
     proptest! {
+        // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         #[test]
         fn otsu_maximises_between_class_variance(h in proptest::collection::vec(0u32..5000, 256)) {
             let mut hist = [0u32; 256];

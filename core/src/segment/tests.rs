@@ -136,6 +136,9 @@ fn nearest<'a>(objs: &'a [Object], f: &Fish) -> Option<&'a Object> {
 }
 
 #[test]
+// Frames of 60 000+ pixels take many minutes each under Miri (measured: over 5 min
+// for 512²); `never_panics_and_stays_in_bounds` runs the same code on small frames.
+#[cfg_attr(miri, ignore)]
 fn finds_each_fish_once_with_its_length() {
     let (w, h) = (512, 512);
     let fish = school(w);
@@ -162,6 +165,9 @@ fn finds_each_fish_once_with_its_length() {
 }
 
 #[test]
+// Frames of 60 000+ pixels take many minutes each under Miri (measured: over 5 min
+// for 512²); `never_panics_and_stays_in_bounds` runs the same code on small frames.
+#[cfg_attr(miri, ignore)]
 fn mesh_alone_and_flat_frames_give_nothing() {
     let (w, h) = (256, 256);
     let p = Params::for_frame(w as u32);
@@ -187,6 +193,9 @@ fn mesh_alone_and_flat_frames_give_nothing() {
 }
 
 #[test]
+// Frames of 60 000+ pixels take many minutes each under Miri (measured: over 5 min
+// for 512²); `never_panics_and_stays_in_bounds` runs the same code on small frames.
+#[cfg_attr(miri, ignore)]
 fn capacity_keeps_the_largest() {
     let (w, h) = (512, 512);
     let fish = school(w);
@@ -214,6 +223,9 @@ fn capacity_keeps_the_largest() {
 }
 
 #[test]
+// Frames of 60 000+ pixels take many minutes each under Miri (measured: over 5 min
+// for 512²); `never_panics_and_stays_in_bounds` runs the same code on small frames.
+#[cfg_attr(miri, ignore)]
 fn overlapping_regions_do_not_duplicate() {
     // two fish close together: their enlarged ellipses overlap
     let (w, h) = (384, 256);
@@ -284,7 +296,8 @@ fn too_small_workspace_is_an_error() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+    #![proptest_config(ProptestConfig { cases: if cfg!(miri) { 2 } else { 64 }, ..ProptestConfig::default() })]
     #[test]
     fn never_panics_and_stays_in_bounds(
         w in 1usize..96, h in 1usize..96, seed in any::<u64>(), noise in 0.0f32..60.0,
@@ -328,6 +341,8 @@ proptest! {
 }
 
 #[test]
+// A 2048² frame takes hours under Miri; the small-frame tests cover the same code.
+#[cfg_attr(miri, ignore)]
 fn full_size_frame_with_recommended_capacities() {
     let (w, h) = (2048usize, 2048usize);
     let fish = school(w);
@@ -367,6 +382,9 @@ fn full_size_frame_with_recommended_capacities() {
 }
 
 #[test]
+// Frames of 60 000+ pixels take many minutes each under Miri (measured: over 5 min
+// for 512²); `never_panics_and_stays_in_bounds` runs the same code on small frames.
+#[cfg_attr(miri, ignore)]
 fn padded_rows_give_the_same_objects() {
     let (w, h) = (300usize, 200usize);
     let fish = [Fish {
@@ -401,6 +419,8 @@ fn padded_rows_give_the_same_objects() {
 }
 
 #[test]
+// A 2048² frame takes hours under Miri; the small-frame tests cover the same code.
+#[cfg_attr(miri, ignore)]
 fn full_size_stage_times() {
     // information only (no timed assertion): where a 2048² frame's time goes
     let (w, h) = (2048usize, 2048usize);

@@ -293,7 +293,8 @@ fn arb_obs() -> impl Strategy<Value = Observation> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(64))]
+    // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
+    #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 2 } else { 64 }))]
 
     /// Random observations, tiny capacities (every overflow path), all three
     /// associations: no panic, events consistent.
