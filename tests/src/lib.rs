@@ -10,8 +10,9 @@
 #![deny(missing_docs)]
 
 use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, Stdio};
 use std::sync::{Mutex, OnceLock};
 
 /// Path where cargo puts a workspace binary for the profile of this test.
@@ -69,4 +70,55 @@ pub fn built_bin(package: &str, name: &str) -> &'static Path {
     let leaked: &'static Path = Box::leak(path.into_boxed_path());
     map.insert(name.to_string(), leaked);
     leaked
+}
+
+/// A child process killed (and reaped) when dropped.
+pub struct Proc(pub Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A real pseudo-terminal pair made by socat: `a` for the device, `b` for
+/// the host. socat lives as long as the pair.
+pub struct PtyPair {
+    /// The socat process joining the two ptys.
+    pub socat: Proc,
+    /// Device side.
+    pub a: String,
+    /// Host side.
+    pub b: String,
+}
+
+/// Makes a [`PtyPair`] (`socat -d -d pty,raw,echo=0 pty,raw,echo=0`);
+/// panics with a clear message when socat is missing.
+pub fn pty_pair() -> PtyPair {
+    let mut child = Command::new("socat")
+        .args(["-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("socat is needed for the pseudo-terminal tests (apt-get install socat)");
+    let err = child.stderr.take().expect("socat stderr");
+    let socat = Proc(child);
+    let mut ptys = Vec::new();
+    let mut lines = BufReader::new(err).lines();
+    while let Some(Ok(l)) = lines.next() {
+        if let Some(i) = l.find("PTY is ") {
+            ptys.push(l[i + 7..].trim().to_string());
+        }
+        if l.contains("starting data transfer loop") {
+            break;
+        }
+    }
+    assert_eq!(ptys.len(), 2, "socat did not report two ptys");
+    // Keep draining socat's stderr so it never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines {});
+    let b = ptys.pop().expect("pty b");
+    let a = ptys.pop().expect("pty a");
+    PtyPair { socat, a, b }
 }

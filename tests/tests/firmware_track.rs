@@ -9,7 +9,7 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -19,41 +19,7 @@ static SERIAL: Mutex<()> = Mutex::new(());
 
 const FRAMES: u32 = 12;
 
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn pty_pair() -> (Proc, String, String) {
-    let mut child = Command::new("socat")
-        .args(["-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("socat is needed for the pseudo-terminal tests (apt-get install socat)");
-    let err = child.stderr.take().expect("socat stderr");
-    let socat = Proc(child);
-    let mut ptys = Vec::new();
-    let mut lines = BufReader::new(err).lines();
-    while let Some(Ok(l)) = lines.next() {
-        if let Some(i) = l.find("PTY is ") {
-            ptys.push(l[i + 7..].trim().to_string());
-        }
-        if l.contains("starting data transfer loop") {
-            break;
-        }
-    }
-    assert_eq!(ptys.len(), 2, "socat did not report two ptys");
-    std::thread::spawn(move || for _ in lines {});
-    let b = ptys.pop().expect("pty b");
-    let a = ptys.pop().expect("pty a");
-    (socat, a, b)
-}
+use fishtrack_tests::{pty_pair, Proc};
 
 fn run_ok(cmd: &mut Command) {
     let out = cmd.output().expect("run");
@@ -106,7 +72,8 @@ fn firmware_sim_reports_the_same_fish_as_track() {
     let expected = fish_csv(&out.join("fish.csv"));
     assert!(!expected.is_empty(), "the haul should give fish");
 
-    let (_socat, a, b) = pty_pair();
+    let pty = pty_pair();
+    let (a, b) = (pty.a.clone(), pty.b.clone());
     let mut child = Command::new(sim)
         .args(["--serial", &a, "--haul"])
         .arg(&haul)

@@ -8,7 +8,7 @@
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -29,52 +29,7 @@ fn binaries() -> (&'static Path, &'static Path) {
     )
 }
 
-/// A child process killed when dropped.
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// A socat pseudo-terminal pair: `a` for the device, `b` for the host.
-struct PtyPair {
-    _socat: Proc,
-    a: String,
-    b: String,
-}
-
-fn pty_pair() -> PtyPair {
-    let mut child = Command::new("socat")
-        .args(["-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("socat is needed for the pseudo-terminal tests (apt-get install socat)");
-    let err = child.stderr.take().expect("socat stderr");
-    let socat = Proc(child);
-    let mut ptys = Vec::new();
-    let mut lines = BufReader::new(err).lines();
-    while let Some(Ok(l)) = lines.next() {
-        if let Some(i) = l.find("PTY is ") {
-            ptys.push(l[i + 7..].trim().to_string());
-        }
-        if l.contains("starting data transfer loop") {
-            break;
-        }
-    }
-    assert_eq!(ptys.len(), 2, "socat did not report two ptys");
-    // Keep draining socat's stderr so it never blocks on a full pipe.
-    std::thread::spawn(move || for _ in lines {});
-    PtyPair {
-        _socat: socat,
-        b: ptys.pop().expect("pty b"),
-        a: ptys.pop().expect("pty a"),
-    }
-}
+use fishtrack_tests::{pty_pair, Proc};
 
 /// Start the simulator on `port` and wait until it serves.
 fn start_sim(port: &str, fault: Option<&str>) -> Proc {
