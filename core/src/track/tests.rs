@@ -1,4 +1,5 @@
-//! Scenario and property tests of the tracker.
+//! Scenario and property tests of the tracker. Test-only: declared as
+//! `#[cfg(test)] mod tests;` in `track/mod.rs`, so std is fine here.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use super::*;
