@@ -1,4 +1,5 @@
-//! Segmentation tests on drawn frames: fish-like ellipses with texture,
+//! Segmentation tests on drawn frames (test-only: `#[cfg(test)] mod tests;`
+//! in `segment/mod.rs`): fish-like ellipses with texture,
 //! an illumination gradient, noise and a diagonal trawl mesh.
 
 use super::*;
