@@ -4,7 +4,7 @@
 //! within 1 grey level, identical object sets, mask IoU ≥ 0.99), stereo
 //! pairs and lengths ([`crate::reference_stereo::compare`] on the core's
 //! objects: identical pairs, lengths within 0.5 %), and track assignments
-//! ([`crate::reference_track`] on the observations the pipeline built:
+//! ([`crate::reference::track`] on the observations the pipeline built:
 //! identical). Prints an agreement table; any disagreement is an error
 //! (exit 1).
 
@@ -15,8 +15,8 @@ use anyhow::Result;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
 use crate::reference::compare::compare_segmentation;
+use crate::reference::track::{self as rt, Assignment, Capacities};
 use crate::reference_stereo::{self as rs, Geometry, Gray, Limits};
-use crate::reference_track::{self as rt, Assignment, Capacities};
 use crate::track_cmd::{new_pipeline, prepare, views, TrackOptions};
 
 #[derive(Default)]

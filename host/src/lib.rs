@@ -18,7 +18,6 @@ pub mod params_file;
 pub mod rectify;
 pub mod reference;
 pub mod reference_stereo;
-pub mod reference_track;
 pub mod synth;
 pub mod timing;
 pub mod track_cmd;

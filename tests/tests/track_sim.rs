@@ -11,7 +11,7 @@
 //! Print the tables with
 //! `cargo test --release -p fishtrack-tests --test track_sim -- --nocapture`.
 
-use fishtrack::reference_track;
+use fishtrack::reference;
 use fishtrack_core::image::Roi;
 use fishtrack_core::params::{Params, Tracker as Assoc};
 use fishtrack_core::track::{
@@ -561,9 +561,10 @@ fn core_and_reference_assign_identically() {
                 tracker: a,
                 ..Params::for_frame(W)
             };
-            let r = reference_track::run(&h.frames, &p, &cfg, reference_track::Capacities::DEFAULT);
+            let r =
+                reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
             let core_full = run_core_full(&h, a);
-            let rep = reference_track::compare(&core_full, &r);
+            let rep = reference::track::compare(&core_full, &r);
             assert!(rep.identical(), "seed {seed} {a:?}: {rep:?}");
             total += core.len();
         }
@@ -571,7 +572,7 @@ fn core_and_reference_assign_identically() {
     println!("core vs reference: identical assignments over {total} claimed observations");
 }
 
-fn run_core_full(h: &Haul, assoc: Assoc) -> Vec<reference_track::Assignment> {
+fn run_core_full(h: &Haul, assoc: Assoc) -> Vec<reference::track::Assignment> {
     let mut tr: DefaultTracker = Tracker::new(TrackConfig::for_frame(W, W)).unwrap();
     let p = Params {
         tracker: assoc,
@@ -580,7 +581,7 @@ fn run_core_full(h: &Haul, assoc: Assoc) -> Vec<reference_track::Assignment> {
     let mut out = Vec::new();
     let mut sink = |e: &TrackEvent<'_>| {
         if let TrackEvent::Frame { track, step } = e {
-            out.push(reference_track::Assignment {
+            out.push(reference::track::Assignment {
                 frame: step.frame,
                 track: *track,
                 obs: step.obs,

@@ -107,7 +107,7 @@ pub struct Sigmas {
 impl Sigmas {
     /// Defaults for a `width`-pixel-wide frame: σ_v = 250 px and σ_v0 = 350 px
     /// at 2048 (scaled linearly; 5 fps prediction errors are hundreds of
-    /// pixels), σ_a = 0.25, σ_m = 0.5 rad, σ_h = 1 bin, σ_d = 0.08.
+    /// pixels), σ_a = 0.25, σ_m = 0.5 rad, σ_h = 1 bin, σ_d = 0.04.
     pub fn for_frame(width: u32) -> Sigmas {
         let s = width as f32 / crate::params::PAPER_FRAME_WIDTH as f32;
         let sv = 250.0 * s;
@@ -118,7 +118,7 @@ impl Sigmas {
             a: 0.25 * 0.25,
             m: 0.5 * 0.5,
             h: 1.0,
-            d: 0.08 * 0.08,
+            d: 0.04 * 0.04,
         }
     }
 }

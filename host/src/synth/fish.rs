@@ -8,15 +8,28 @@
 //! bent one ([`MAX_BEND`] bounds the curl). `truth.json`'s `length_mm` is
 //! this arc length; its `head_mm`/`tail_mm` are the bent fish's end points.
 //!
-//! Motion (paper Section II: 5 fps, ≈ 4 frames of life in view): fish
-//! arrive in small schools ([`School`]: shared entry border and place,
-//! heading, range, speed and size class) and enter across a border (mostly
-//! the right one, heading −x; 18 % swim +x; 38 % enter across the top or
+//! Motion (paper Section II: 5 fps, ≈ 4 frames of life in view; the
+//! camera sits in the aft end of a trawl, so the fish are carried through
+//! the view by the flow, mostly head first towards −x): fish arrive in
+//! small schools ([`School`]: shared entry border and place, heading,
+//! range, speed and size class) and enter across a border (mostly the
+//! right one, heading −x; 18 % swim +x; 38 % enter across the top or
 //! bottom). Each frame they step by 15–30 % of the view's width at their
-//! range, with abrupt, independent changes of speed (log-σ 0.45) and
-//! heading (σ 22°), occasional lasting turns of 30–85°, drift in range,
-//! and are dropped once well outside both views. Bodies point along the
-//! displacement but lean towards the trawl axis; 7 % drift tail first.
+//! range, hundreds of pixels, so frame-to-frame association is hard for
+//! nearest neighbour where fish enter close together. The step is smooth
+//! in the way a carried fish's is: per fish, independent per-frame heading
+//! jitter of σ 2–7° and speed jitter of log-σ 0.04–0.12 around its own
+//! speed, a slowly wandering mean heading (σ 1.7° per frame), an
+//! occasional lasting turn (4 % of frames, 10–35°), a slow drift in range,
+//! and fish are dropped once well outside both views. Bodies point along
+//! the displacement but lean towards the trawl axis; 7 % drift tail first.
+//!
+//! (Until session 2 the jitter was σ 22° and log-σ 0.45 per frame with
+//! 15 % of frames turning by 30–85°: a prediction from each fish's true
+//! previous velocity then missed by a median of ~250 px at 2048², and
+//! even the paper's cues could not follow it, whereas the paper's
+//! vicinity cue — a prediction from the velocity — is its strongest cue
+//! on real footage, Fig. 15.)
 
 use nalgebra::{Rotation3, Unit, Vector3};
 use rand::Rng;
@@ -340,9 +353,13 @@ impl FishLife {
         let width_at = |z: f64| 2.0 * z * tx;
         let v_frac = school.v_frac * (0.15 * normal(rng)).exp();
         let tail_first = rng.random_bool(0.07);
+        // Per-fish smoothness: heading jitter (rad) and speed jitter (log-σ)
+        // per frame.
+        let heading_sd = rng.random_range(0.035..0.12);
+        let speed_sd = rng.random_range(0.04..0.12);
         let step = |rng: &mut R, phi_m: f64, z: f64| {
-            let speed = v_frac * width_at(z) * (0.45 * normal(rng)).exp().clamp(0.3, 2.6);
-            let phi = phi_m + 0.38 * normal(rng);
+            let speed = v_frac * width_at(z) * (speed_sd * normal(rng)).exp().clamp(0.6, 1.6);
+            let phi = phi_m + heading_sd * normal(rng);
             (speed, phi)
         };
         // Start outside: the snout on the border, then back by a random part of a step.
@@ -354,14 +371,16 @@ impl FishLife {
         let mut vz = 0.0;
         for k in 0..60 {
             if k > 0 {
-                // Occasional sharp, lasting turn.
-                if rng.random_bool(0.15) {
-                    let turn = rng.random_range(0.5..1.5);
+                // The mean heading wanders slowly; occasionally the fish
+                // makes a lasting turn.
+                phi_m += 0.03 * normal(rng);
+                if rng.random_bool(0.04) {
+                    let turn = rng.random_range(0.17..0.6);
                     phi_m += if rng.random_bool(0.5) { turn } else { -turn };
                 }
                 let (speed, p) = step(rng, phi_m, z);
                 phi = p;
-                vz = 0.6 * vz + 0.06 * z * normal(rng);
+                vz = 0.6 * vz + 0.025 * z * normal(rng);
                 let mut c = centre + Vector3::new(phi.cos(), phi.sin(), 0.0) * speed;
                 c.z += vz;
                 if c.z < RANGE_MM.0 - 100.0 || c.z > RANGE_MM.1 + 300.0 {

@@ -418,11 +418,45 @@ pub fn run(
             }
         }
 
-        for ti in 0..targets.len() {
-            let t = &mut targets[ti];
+        for t in targets.iter_mut() {
             if t.stages.len() >= cap.depth {
                 commit_oldest(t, &mut out);
             }
+        }
+        // Viterbi selection: a joint one-to-one assignment (greedy, smallest
+        // first) of observations to targets on the increment of the
+        // target's best accumulated cost, C_i + c_ij − min C, below the
+        // miss cost; taking another target's observation costs share_cost.
+        let mut owner: Vec<Option<usize>> = vec![None; cands.len()];
+        if p.tracker == Assoc::Viterbi {
+            let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+            for (ti, t) in targets.iter().enumerate() {
+                let base = t.front.iter().map(|s| s.cost).fold(f64::INFINITY, f64::min);
+                for (ci, c) in cands.iter().enumerate() {
+                    let mut inc = f64::INFINITY;
+                    for st in &t.front {
+                        let (e, _, _) = edge(st, c, &k);
+                        if e < gate {
+                            inc = inc.min(st.cost + e - base);
+                        }
+                    }
+                    if inc < miss {
+                        pairs.push((inc, ti, ci));
+                    }
+                }
+            }
+            pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            let mut done = vec![false; targets.len()];
+            for (_, ti, ci) in pairs {
+                if !done[ti] && owner[ci].is_none() {
+                    done[ti] = true;
+                    owner[ci] = Some(ti);
+                }
+            }
+        }
+
+        for ti in 0..targets.len() {
+            let t = &mut targets[ti];
             // New stage: (state, node).
             let mut new: Vec<(State, Node)> = Vec::new();
             let mk_real = |pst: &State, pi: usize, acc: f64, c: &Cand| -> (State, Node) {
@@ -474,11 +508,10 @@ pub fn run(
             if p.tracker == Assoc::Viterbi {
                 let mut real: Vec<(f64, usize, usize)> = Vec::new(); // (C, cand, pred)
                 for (ci, c) in cands.iter().enumerate() {
-                    // Node already on an older target's best path: share cost.
-                    let share = if taken[c.obs] {
-                        cfg.share_cost as f64
-                    } else {
-                        0.0
+                    // Observation selected for another target: share cost.
+                    let share = match owner[ci] {
+                        Some(o) if o != ti => cfg.share_cost as f64,
+                        _ => 0.0,
                     };
                     let mut best: Option<(f64, usize)> = None;
                     for (i, st) in t.front.iter().enumerate() {
