@@ -297,3 +297,46 @@ fn print_failures() {
     }
     println!("split {split} shared {shared} short {short}");
 }
+
+/// Prints every closed track of haul seed `FISHTRACK_SEED` (reason, path
+/// as frame:fish) — for diagnosing failures.
+#[test]
+#[ignore = "diagnostic: needs FISHTRACK_TRACK_HAULS and FISHTRACK_SEED"]
+fn print_closed_tracks() {
+    use fishtrack_core::track::{DefaultTracker, TrackEvent};
+    let seed: u64 = std::env::var("FISHTRACK_SEED").unwrap().parse().unwrap();
+    for to in hauls_from_env(false)
+        .iter()
+        .filter(|h| h.truth.seed == seed)
+    {
+        let p = Params::for_frame(to.truth.width);
+        let mut cfg = TrackConfig::for_frame(to.truth.width, to.truth.height);
+        tweak(&mut cfg);
+        let mut tr = DefaultTracker::new(cfg).unwrap();
+        let mut sink = |e: &TrackEvent<'_>| {
+            if let TrackEvent::Closed {
+                track,
+                reason,
+                path,
+                ..
+            } = e
+            {
+                let s: Vec<String> = path
+                    .iter()
+                    .map(|st| match st.obs {
+                        Some(o) => {
+                            let of = &to.frames[st.frame as usize - 1];
+                            format!("f{}:F{}", st.frame, of.source[o as usize].0)
+                        }
+                        None => format!("f{}:-", st.frame),
+                    })
+                    .collect();
+                println!("track {track} {reason:?}: {}", s.join(" "));
+            }
+        };
+        for of in &to.frames {
+            tr.step(of.frame, &of.obs, &p, &mut sink).unwrap();
+        }
+        tr.finish(&mut sink);
+    }
+}

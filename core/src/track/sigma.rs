@@ -20,7 +20,8 @@
 //!
 //! The same rings estimate `v_init`, the velocity a newborn target is
 //! projected with: the component-wise median displacement of accepted
-//! edges (0 until `min_samples`).
+//! edges; until `min_samples`, v_ref (Table I) scaled to cross the frame
+//! width in the paper's 4.3 frames of lifespan (Section II).
 //!
 //! Memory: 8 rings of [`WINDOW`] f32 (3.6 KiB).
 
@@ -145,9 +146,14 @@ impl SigmaEstimator {
 
     /// Velocity for projecting a newborn target (median displacement).
     pub fn v_init(&self, min_samples: usize) -> [f32; 2] {
+        self.v_init_or(min_samples, [0.0, 0.0])
+    }
+
+    /// As [`Self::v_init`], but `default` until `min_samples` displacements.
+    pub fn v_init_or(&self, min_samples: usize, default: [f32; 2]) -> [f32; 2] {
         match (self.vx.median(min_samples), self.vy.median(min_samples)) {
             (Some(x), Some(y)) => [x, y],
-            _ => [0.0, 0.0],
+            _ => default,
         }
     }
 }

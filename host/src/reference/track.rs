@@ -378,7 +378,14 @@ pub fn run(
         }
         let v_init = match (median(&sig.vx, min), median(&sig.vy, min)) {
             (Some(x), Some(y)) => [x, y],
-            _ => [0.0, 0.0],
+            // Before the data give one: v_ref crossing the width in the
+            // paper's 4.3 frames of lifespan (Section II).
+            _ => {
+                let (x, y) = (p.v_ref_x as f64, p.v_ref_y as f64);
+                let n = (x * x + y * y).sqrt();
+                let s = cfg.width as f64 / 4.3 / n;
+                [x * s, y * s]
+            }
         };
         let k = Costs {
             s,
@@ -623,6 +630,25 @@ pub fn run(
         let mu = p.margin;
         for c in &cands {
             if taken[c.obs] {
+                continue;
+            }
+            // Near the prediction of a target lost this frame: its partly
+            // hidden view, not a new fish.
+            let near_lost = targets.iter().any(|t| {
+                let b = (0..t.front.len()).fold(0, |b, i| {
+                    if t.front[i].cost < t.front[b].cost {
+                        i
+                    } else {
+                        b
+                    }
+                });
+                t.front.get(b).is_some_and(|s| {
+                    let dx = c.left.pos[0] - s.left.pos[0];
+                    let dy = c.left.pos[1] - s.left.pos[1];
+                    s.lost > 0 && (dx * dx + dy * dy) / k.s[0] < cfg.lost_gate as f64
+                })
+            });
+            if near_lost {
                 continue;
             }
             let (x0, y0, x1, y1) = c.bbox;
