@@ -427,7 +427,7 @@ pub const LIFESPAN_FRAMES: f32 = 4.3;
 pub fn default_v_init(params: &Params, width: u32) -> [f32; 2] {
     let (x, y) = (params.v_ref_x, params.v_ref_y);
     let n = micromath::F32(x * x + y * y).sqrt().0;
-    if !(n > 0.0) {
+    if n.is_nan() || n <= 0.0 {
         return [0.0, 0.0];
     }
     let s = width as f32 / LIFESPAN_FRAMES / n;
