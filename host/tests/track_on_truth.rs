@@ -8,6 +8,7 @@
 //! ```text
 //! cargo build --release -p fishtrack
 //! for s in 1 2 3 4 5 6 7 8; do target/release/fishtrack synth /tmp/trkh/s$s --seed $s --size 1024 --frames 30; done
+//! # (print_failures / print_closed_tracks: the diagnostics below)
 //! FISHTRACK_TRACK_HAULS=/tmp/trkh cargo test --release -p fishtrack --test track_on_truth -- --ignored --nocapture
 //! ```
 //! (every sub-directory of `FISHTRACK_TRACK_HAULS` holding a `truth.json`
@@ -104,9 +105,9 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 /// Bound on this test's hauls (seeds 11, 12 at 768², 20 frames): measured
-/// Viterbi 0.586 (MC 0.517, NN 0.138) at commit time; > 0.1 margin for
-/// later tracker changes.
-const FAST_VITERBI_MIN: f64 = 0.45;
+/// Viterbi 0.818 (MC 0.818, NN 0.424) at commit time (session 2, smooth
+/// carried motion); > 0.1 margin for later tracker changes.
+const FAST_VITERBI_MIN: f64 = 0.7;
 
 #[test]
 fn viterbi_beats_mc_beats_nn_on_small_hauls() {
@@ -147,16 +148,20 @@ fn table_v_and_fig15_on_truth() {
     let full = hauls_from_env(false);
     let thin = hauls_from_env(true);
     println!("hauls: {}", full.len());
-    println!("| haul (seed) | fish | NN hardness best | NN | MC | Viterbi | Viterbi 2.5 fps |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| seed | fish | life | per frame | hardness NN default | hardness NN best | NN | MC | Viterbi | Viterbi 2.5 fps |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (h, t) in full.iter().zip(&thin) {
         let one = |a, x: &TruthObs| success(std::slice::from_ref(x), a, Cues::ALL);
         let v = one(Assoc::Viterbi, h);
+        let hd = hardness(&h.truth);
         println!(
-            "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {} | {:.2} | {:.1} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
             h.truth.seed,
             v.1,
-            hardness(&h.truth).best_rate,
+            hd.mean_life,
+            hd.mean_per_frame,
+            hd.default_rate,
+            hd.best_rate,
             rate(one(Assoc::Nn, h)),
             rate(one(Assoc::Mc, h)),
             rate(v),
