@@ -79,6 +79,9 @@ fn tweak(cfg: &mut TrackConfig) {
     if let Some(&c) = f.get(12) {
         cfg.sigma_defaults.d = c * c;
     }
+    if let Some(&c) = f.get(13) {
+        cfg.lost_gate = c;
+    }
 }
 
 fn rate((c, n): (u64, u64)) -> f64 {

@@ -7,8 +7,12 @@
 //! median rank ⌊n/2⌋ / 0.4549, clamped to [default, 16·default], after
 //! `min_sigma_samples`); the candidate gate; K − 1 cheapest real nodes plus
 //! one predicted node per stage; commit of the oldest stage along the best
-//! path with pruning at depth D; births (border margin or large area) and
-//! deaths (exit margin, `max_lost`); greedy MC/NN; capacities T, D, K, N.
+//! path with pruning at depth D; the joint selection of each frame's best
+//! nodes (greedy one-to-one on C_i + c_ij − min C) and the share cost;
+//! births (border margin or large area, none next to a lost target's
+//! prediction) and deaths (exit margin, `max_lost`); the newborn velocity
+//! (median displacement, else v_ref · W / 4.3); greedy MC/NN; capacities
+//! T, D, K, N.
 //! Differences that are allowed: f64 instead of f32, exact histogram CDFs
 //! instead of 16-bit fixed point.
 #![allow(clippy::needless_range_loop)] // index loops mirror the paper's notation
