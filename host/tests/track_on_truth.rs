@@ -171,6 +171,25 @@ fn table_v_and_fig15_on_truth() {
             rate(one(Assoc::Viterbi, t)),
         );
     }
+    for (name, a) in [
+        ("NN", Assoc::Nn),
+        ("MC", Assoc::Mc),
+        ("Viterbi", Assoc::Viterbi),
+    ] {
+        let (mut tracks, mut fish) = (0, 0);
+        for to in &full {
+            let mut p = Params::for_frame(to.truth.width);
+            p.tracker = a;
+            let cfg = TrackConfig::for_frame(to.truth.width, to.truth.height);
+            let s = score(to, &run_tracker(to, &p, cfg)).unwrap();
+            tracks += s.count.tracks;
+            fish += s.count.fish;
+        }
+        println!(
+            "{name}: {tracks} tracks for {fish} countable fish, count error {:+.1} %",
+            100.0 * (tracks as f64 - fish as f64) / fish as f64
+        );
+    }
     println!("| tracker | 5 fps | 2.5 fps | drop |");
     println!("|---|---|---|---|");
     for (name, a) in [
