@@ -21,7 +21,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use image::GrayImage;
 use nalgebra::{Matrix3x4, Vector3};
 use serde_json::json;
@@ -200,6 +200,8 @@ pub struct HaulOutcome {
     pub frames: u32,
     /// Seconds spent per frame (all stages, read and rectify included).
     pub seconds_per_frame: f64,
+    /// Lengths of the measured fish, mm (`fish.csv` order).
+    pub lengths: Vec<f64>,
 }
 
 const STAGES: [&str; 7] = [
@@ -225,8 +227,12 @@ fn stage_index(s: Stage) -> usize {
 /// Tracks one haul into `out` (created if needed).
 pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOutcome> {
     let setup = prepare(dir, opts)?;
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("{}: cannot create the output directory", out.display()))?;
+    crate::survey::prepare_out_dir(out)?;
+    let bar = crate::progress::bar(
+        setup.haul.frames.len() as u64,
+        &crate::survey::short_name(dir),
+        "frames",
+    );
     let mut pipe = new_pipeline(&setup)?;
     let (w, h) = (setup.width as usize, setup.height as usize);
     let mut ws = vec![0u8; DefaultPipeline::workspace_size(w, h)];
@@ -260,7 +266,9 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
         .map_err(|e| {
             InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
         })?;
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     let t = Instant::now();
     pipe.finish(&mut |e| events.push(*e));
     secs[6] += t.elapsed().as_secs_f64();
@@ -268,7 +276,11 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     let stats = pipe.stats();
     let frames = setup.haul.frames.len() as u32;
     let written = write_outputs(&setup, out, &events, opts)?;
+    if opts.overlays {
+        write_overlays(&setup, out, &events, &written.fish)?;
+    }
     let timings: BTreeMap<&str, f64> = STAGES.iter().copied().zip(secs).collect();
+    // Last: summary.json marks the output folder complete.
     write_summary(&setup, out, &written, &stats, &timings, total)?;
     Ok(HaulOutcome {
         fish: written.fish.len(),
@@ -279,6 +291,7 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
             .count(),
         frames,
         seconds_per_frame: total / frames.max(1) as f64,
+        lengths: written.fish.iter().filter_map(|f| f.length_mm).collect(),
     })
 }
 
@@ -398,6 +411,68 @@ fn write_outputs(
     })
 }
 
+/// `OUT/overlays/NNNNNN.png` for every frame (frames re-read and
+/// re-rectified, in parallel) and `OUT/length_frequency.svg`/`.png` with the
+/// truth's lengths overlaid when `HAUL/truth.json` exists.
+fn write_overlays(
+    setup: &Setup,
+    out: &Path,
+    events: &[PipelineEvent],
+    fish: &[FishOut],
+) -> Result<()> {
+    use rayon::prelude::*;
+    let dir = out.join("overlays");
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| InputError::file(&dir, format!("cannot create the directory: {e}")))?;
+    crate::survey::remove_partials(&dir);
+    let marks = crate::overlay::marks_from_events(events, fish);
+    let lengths: BTreeMap<u32, Option<f64>> =
+        fish.iter().map(|f| (f.track_id, f.length_mm)).collect();
+    let font = crate::overlay::font();
+    let empty = crate::overlay::FrameMarks::default();
+    let bar = crate::progress::bar(setup.haul.frames.len() as u64, "overlays", "frames");
+    setup
+        .haul
+        .frames
+        .par_iter()
+        .try_for_each(|pair| -> Result<()> {
+            let (l, r) = setup.rectified(pair)?;
+            let m = marks.get(&pair.index).unwrap_or(&empty);
+            let img = crate::overlay::render(pair.index, &l, &r, m, &lengths, &font);
+            crate::plot::write_png(&dir.join(crate::overlay::file_name(pair.index)), &img)?;
+            bar.inc(1);
+            Ok(())
+        })?;
+    bar.finish_and_clear();
+    let counted: Vec<f64> = fish.iter().filter_map(|f| f.length_mm).collect();
+    let truth_path = setup.haul.dir.join("truth.json");
+    let truth_lengths = if truth_path.is_file() {
+        let truth = crate::truth::Truth::load(&truth_path)?;
+        let frames = crate::eval::truth_frames::TruthFrames::new(&truth)?;
+        Some(
+            frames
+                .countable_fish()
+                .into_iter()
+                .map(|k| truth.fish[k].length_mm)
+                .collect::<Vec<f64>>(),
+        )
+    } else {
+        None
+    };
+    let title = format!(
+        "Length frequency: {} ({} fish counted, {} measured)",
+        crate::survey::short_name(&setup.haul.dir),
+        fish.len(),
+        counted.len()
+    );
+    crate::plot::write_length_frequency(
+        &out.join("length_frequency"),
+        &counted,
+        truth_lengths.as_deref(),
+        &title,
+    )
+}
+
 fn write_summary(
     setup: &Setup,
     out: &Path,
@@ -484,40 +559,11 @@ fn write_summary(
     write_json(&out.join("summary.json"), &summary)
 }
 
-/// `fishtrack track HAUL... --out OUT`.
+/// `fishtrack track HAUL... --out OUT`: one haul into OUT, several into
+/// `OUT/<haul name>/` each plus `OUT/survey.csv` ([`crate::survey`]).
 pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
-    if opts.overlays {
-        return Err(InputError::plain("--overlays", "overlays are not built yet").into());
-    }
     if let Some(t) = &opts.tracker {
         parse_tracker(t)?;
     }
-    let many = hauls.len() > 1;
-    for h in hauls {
-        let dest = if many {
-            let name = h
-                .file_name()
-                .map(|n| n.to_owned())
-                .or_else(|| {
-                    h.canonicalize()
-                        .ok()
-                        .and_then(|p| p.file_name().map(|n| n.to_owned()))
-                })
-                .unwrap_or_else(|| "haul".into());
-            out.join(name)
-        } else {
-            out.to_path_buf()
-        };
-        let o = track_haul(h, &dest, opts)?;
-        println!(
-            "{}: {} frames, {} fish ({} measured), {:.2} s/frame → {}",
-            h.display(),
-            o.frames,
-            o.fish,
-            o.measured,
-            o.seconds_per_frame,
-            dest.display()
-        );
-    }
-    Ok(())
+    crate::survey::run(hauls, out, opts)
 }
