@@ -4,7 +4,8 @@
 //! - One haul: its outputs go straight into `DIR` (DESIGN.md, "Output").
 //! - Several hauls: tracked in parallel (rayon's pool, one worker per core,
 //!   so at most that many hauls are in memory at once), each into
-//!   `DIR/<haul directory name>/`, then `DIR/survey.csv` with one row per
+//!   `DIR/<haul directory name>/` (hauls on their own pool of
+//!   [`HAUL_STACK_BYTES`]-stack threads), then `DIR/survey.csv` with one row per
 //!   haul in the order given: `haul,fish_count,length_mean_mm,length_sd_mm,
 //!   fish_measured,frames` (mean and sample SD of the measured fish's
 //!   lengths; empty when no fish, resp. fewer than two, were measured).
@@ -28,6 +29,9 @@ use rayon::prelude::*;
 use crate::error::InputError;
 use crate::output::write_atomic;
 use crate::track_cmd::{track_haul, HaulOutcome, TrackOptions};
+
+/// Stack of a haul worker thread (the main thread's 8 MiB).
+pub const HAUL_STACK_BYTES: usize = 8 << 20;
 
 /// `survey.csv`'s header.
 pub const SURVEY_HEADER: [&str; 6] = [
@@ -194,11 +198,23 @@ pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
         }
     }
     prepare_out_dir_plain(out)?;
-    let results: Vec<Result<HaulOutcome>> = hauls
-        .par_iter()
-        .zip(&names)
-        .map(|(h, n)| track_haul(h, &out.join(n), opts))
-        .collect();
+    // Own pool: bounded by the cores, and with main-thread-sized stacks
+    // (the pipeline's setup needs more than rayon's default 2 MiB).
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(hauls.len());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(workers)
+        .stack_size(HAUL_STACK_BYTES)
+        .thread_name(|i| format!("haul-{i}"))
+        .build()?;
+    let results: Vec<Result<HaulOutcome>> = pool.install(|| {
+        hauls
+            .par_iter()
+            .zip(&names)
+            .map(|(h, n)| track_haul(h, &out.join(n), opts))
+            .collect()
+    });
     let mut rows = Vec::new();
     let mut first_err = None;
     for ((h, n), r) in hauls.iter().zip(&names).zip(results) {
