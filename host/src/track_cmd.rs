@@ -228,6 +228,16 @@ fn stage_index(s: Stage) -> usize {
 pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOutcome> {
     let setup = prepare(dir, opts)?;
     crate::survey::prepare_out_dir(out)?;
+    log::info!(
+        "{}: {} frame pairs {}x{}, tracker {:?}, output {}",
+        dir.display(),
+        setup.haul.frames.len(),
+        setup.width,
+        setup.height,
+        setup.params.tracker,
+        out.display()
+    );
+    log::debug!("{}: parameters {:?}", dir.display(), setup.params);
     let bar = crate::progress::bar(
         setup.haul.frames.len() as u64,
         &crate::survey::short_name(dir),
@@ -260,6 +270,16 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
                 secs[stage_index(*stage)] += last.elapsed().as_secs_f64();
                 last = Instant::now();
             } else {
+                if let PipelineEvent::FrameDone { frame, counts } = e {
+                    log::debug!(
+                        "frame {frame}: {} left / {} right objects, {} pairs, {} measured, {} live tracks",
+                        counts.left_objects,
+                        counts.right_objects,
+                        counts.pairs,
+                        counts.measured,
+                        counts.live_tracks
+                    );
+                }
                 events.push(*e);
             }
         })
