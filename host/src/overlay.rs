@@ -27,7 +27,9 @@ use fishtrack_core::image::Roi;
 use fishtrack_core::object::OrientedBox;
 use fishtrack_core::pipeline::PipelineEvent;
 
+use crate::error::InputError;
 use crate::output::FishOut;
+use crate::track_cmd::Setup;
 
 /// DejaVu Sans Mono, see `host/assets/LICENSE-DejaVu.txt`.
 pub const FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSansMono.ttf");
@@ -335,6 +337,41 @@ pub fn render(
         &format!("right (rectified{shrunk})"),
     );
     img
+}
+
+/// Writes `OUT/overlays/NNNNNN.png` for every frame of the haul: frames are
+/// re-read and re-rectified (in parallel) once the tracks are known.
+pub fn write_all(
+    setup: &Setup,
+    out: &std::path::Path,
+    events: &[PipelineEvent],
+    fish: &[FishOut],
+) -> anyhow::Result<()> {
+    use rayon::prelude::*;
+    let dir = out.join("overlays");
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| InputError::file(&dir, format!("cannot create the directory: {e}")))?;
+    crate::survey::remove_partials(&dir);
+    let marks = marks_from_events(events, fish);
+    let lengths: BTreeMap<u32, Option<f64>> =
+        fish.iter().map(|f| (f.track_id, f.length_mm)).collect();
+    let font = font();
+    let empty = FrameMarks::default();
+    let bar = crate::progress::bar(setup.haul.frames.len() as u64, "overlays", "frames");
+    setup
+        .haul
+        .frames
+        .par_iter()
+        .try_for_each(|pair| -> anyhow::Result<()> {
+            let (l, r) = setup.rectified(pair)?;
+            let m = marks.get(&pair.index).unwrap_or(&empty);
+            let img = render(pair.index, &l, &r, m, &lengths, &font);
+            crate::plot::write_png(&dir.join(file_name(pair.index)), &img)?;
+            bar.inc(1);
+            Ok(())
+        })?;
+    bar.finish_and_clear();
+    Ok(())
 }
 
 /// `NNNNNN.png` for frame `index`.

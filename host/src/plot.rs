@@ -196,6 +196,51 @@ pub fn write_length_frequency(
     write_png(&stem.with_extension("png"), &png)
 }
 
+/// Lengths of the fish of `HAUL/truth.json` that a tracker is meant to
+/// count (countable in at least one frame, as `fishtrack eval` decides);
+/// `None` without a truth file. A truth file that does not read is
+/// reported as a warning (it does not stop a tracking run) and skipped.
+pub fn truth_countable_lengths(haul_dir: &std::path::Path) -> Option<Vec<f64>> {
+    let path = haul_dir.join("truth.json");
+    if !path.is_file() {
+        return None;
+    }
+    let read = || -> Result<Vec<f64>, crate::error::InputError> {
+        let truth = crate::truth::Truth::load(&path)?;
+        let frames = crate::eval::truth_frames::TruthFrames::new(&truth)?;
+        Ok(frames
+            .countable_fish()
+            .into_iter()
+            .map(|k| truth.fish[k].length_mm)
+            .collect())
+    };
+    read()
+        .map_err(|e| log::warn!("{e}; the length-frequency plot shows no truth"))
+        .ok()
+}
+
+/// `OUT/length_frequency.svg` and `.png` for a haul's counted `fish`, with
+/// the truth overlaid when the haul has one.
+pub fn write_haul_plot(
+    haul_dir: &std::path::Path,
+    out: &std::path::Path,
+    fish: &[crate::output::FishOut],
+) -> Result<()> {
+    let counted: Vec<f64> = fish.iter().filter_map(|f| f.length_mm).collect();
+    let title = format!(
+        "Length frequency: {} ({} fish counted, {} measured)",
+        crate::survey::short_name(haul_dir),
+        fish.len(),
+        counted.len()
+    );
+    write_length_frequency(
+        &out.join("length_frequency"),
+        &counted,
+        truth_countable_lengths(haul_dir).as_deref(),
+        &title,
+    )
+}
+
 /// Writes an RGB picture as PNG, atomically.
 pub fn write_png(path: &std::path::Path, img: &image::RgbImage) -> Result<()> {
     write_atomic(path, |w| {

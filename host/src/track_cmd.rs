@@ -9,9 +9,10 @@
 //! ([`RectifiedCamera::rect_box_to_raw`]) and its 3-D points from the
 //! rectified into the raw left camera frame (`R1ᵀ·X`), in mm. Writes
 //! `tracks.csv`, `fish.csv`, `detections.csv`, `detections.viame.csv`,
-//! `stereo.csv` and `summary.json` (atomic, deterministic apart from the
-//! timings in `summary.json`). Several hauls: one subfolder
-//! `OUT/<haul dir name>/` each.
+//! `stereo.csv`, with `--overlays` the pictures of [`crate::overlay`] and
+//! the plot of [`crate::plot`], and `summary.json` last, as the completion
+//! marker (atomic, deterministic apart from the timings in `summary.json`).
+//! Several hauls: [`crate::survey`].
 //!
 //! A track the tracker closed as a duplicate of another (same fish counted
 //! twice, see `core::track`) is not a fish: its rows are left out of
@@ -297,7 +298,8 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     let frames = setup.haul.frames.len() as u32;
     let written = write_outputs(&setup, out, &events, opts)?;
     if opts.overlays {
-        write_overlays(&setup, out, &events, &written.fish)?;
+        crate::overlay::write_all(&setup, out, &events, &written.fish)?;
+        crate::plot::write_haul_plot(&setup.haul.dir, out, &written.fish)?;
     }
     let timings: BTreeMap<&str, f64> = STAGES.iter().copied().zip(secs).collect();
     // Last: summary.json marks the output folder complete.
@@ -429,68 +431,6 @@ fn write_outputs(
         duplicates: duplicates.len(),
         fish,
     })
-}
-
-/// `OUT/overlays/NNNNNN.png` for every frame (frames re-read and
-/// re-rectified, in parallel) and `OUT/length_frequency.svg`/`.png` with the
-/// truth's lengths overlaid when `HAUL/truth.json` exists.
-fn write_overlays(
-    setup: &Setup,
-    out: &Path,
-    events: &[PipelineEvent],
-    fish: &[FishOut],
-) -> Result<()> {
-    use rayon::prelude::*;
-    let dir = out.join("overlays");
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| InputError::file(&dir, format!("cannot create the directory: {e}")))?;
-    crate::survey::remove_partials(&dir);
-    let marks = crate::overlay::marks_from_events(events, fish);
-    let lengths: BTreeMap<u32, Option<f64>> =
-        fish.iter().map(|f| (f.track_id, f.length_mm)).collect();
-    let font = crate::overlay::font();
-    let empty = crate::overlay::FrameMarks::default();
-    let bar = crate::progress::bar(setup.haul.frames.len() as u64, "overlays", "frames");
-    setup
-        .haul
-        .frames
-        .par_iter()
-        .try_for_each(|pair| -> Result<()> {
-            let (l, r) = setup.rectified(pair)?;
-            let m = marks.get(&pair.index).unwrap_or(&empty);
-            let img = crate::overlay::render(pair.index, &l, &r, m, &lengths, &font);
-            crate::plot::write_png(&dir.join(crate::overlay::file_name(pair.index)), &img)?;
-            bar.inc(1);
-            Ok(())
-        })?;
-    bar.finish_and_clear();
-    let counted: Vec<f64> = fish.iter().filter_map(|f| f.length_mm).collect();
-    let truth_path = setup.haul.dir.join("truth.json");
-    let truth_lengths = if truth_path.is_file() {
-        let truth = crate::truth::Truth::load(&truth_path)?;
-        let frames = crate::eval::truth_frames::TruthFrames::new(&truth)?;
-        Some(
-            frames
-                .countable_fish()
-                .into_iter()
-                .map(|k| truth.fish[k].length_mm)
-                .collect::<Vec<f64>>(),
-        )
-    } else {
-        None
-    };
-    let title = format!(
-        "Length frequency: {} ({} fish counted, {} measured)",
-        crate::survey::short_name(&setup.haul.dir),
-        fish.len(),
-        counted.len()
-    );
-    crate::plot::write_length_frequency(
-        &out.join("length_frequency"),
-        &counted,
-        truth_lengths.as_deref(),
-        &title,
-    )
 }
 
 fn write_summary(
