@@ -208,7 +208,10 @@ fn interrupt(haul: &Path, out: &Path, trigger: &str, signal: &str) -> bool {
         std::thread::sleep(Duration::from_millis(1));
     };
     let pid = child.id().to_string();
-    let _ = Command::new("kill").args([signal, &pid]).status();
+    // the shell's built-in `kill` (no procps needed)
+    let _ = Command::new("sh")
+        .args(["-c", &format!("kill {signal} {pid}")])
+        .status();
     let _ = child.wait();
     running
 }
