@@ -9,9 +9,10 @@
 //! ([`RectifiedCamera::rect_box_to_raw`]) and its 3-D points from the
 //! rectified into the raw left camera frame (`R1ᵀ·X`), in mm. Writes
 //! `tracks.csv`, `fish.csv`, `detections.csv`, `detections.viame.csv`,
-//! `stereo.csv` and `summary.json` (atomic, deterministic apart from the
-//! timings in `summary.json`). Several hauls: one subfolder
-//! `OUT/<haul dir name>/` each.
+//! `stereo.csv`, with `--overlays` the pictures of [`crate::overlay`] and
+//! the plot of [`crate::plot`], and `summary.json` last, as the completion
+//! marker (atomic, deterministic apart from the timings in `summary.json`).
+//! Several hauls: [`crate::survey`].
 //!
 //! A track the tracker closed as a duplicate of another (same fish counted
 //! twice, see `core::track`) is not a fish: its rows are left out of
@@ -21,7 +22,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use image::GrayImage;
 use nalgebra::{Matrix3x4, Vector3};
 use serde_json::json;
@@ -200,6 +201,8 @@ pub struct HaulOutcome {
     pub frames: u32,
     /// Seconds spent per frame (all stages, read and rectify included).
     pub seconds_per_frame: f64,
+    /// Lengths of the measured fish, mm (`fish.csv` order).
+    pub lengths: Vec<f64>,
 }
 
 const STAGES: [&str; 7] = [
@@ -225,8 +228,22 @@ fn stage_index(s: Stage) -> usize {
 /// Tracks one haul into `out` (created if needed).
 pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOutcome> {
     let setup = prepare(dir, opts)?;
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("{}: cannot create the output directory", out.display()))?;
+    crate::survey::prepare_out_dir(out)?;
+    log::info!(
+        "{}: {} frame pairs {}x{}, tracker {:?}, output {}",
+        dir.display(),
+        setup.haul.frames.len(),
+        setup.width,
+        setup.height,
+        setup.params.tracker,
+        out.display()
+    );
+    log::debug!("{}: parameters {:?}", dir.display(), setup.params);
+    let bar = crate::progress::bar(
+        setup.haul.frames.len() as u64,
+        &crate::survey::short_name(dir),
+        "frames",
+    );
     let mut pipe = new_pipeline(&setup)?;
     let (w, h) = (setup.width as usize, setup.height as usize);
     let mut ws = vec![0u8; DefaultPipeline::workspace_size(w, h)];
@@ -254,13 +271,25 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
                 secs[stage_index(*stage)] += last.elapsed().as_secs_f64();
                 last = Instant::now();
             } else {
+                if let PipelineEvent::FrameDone { frame, counts } = e {
+                    log::debug!(
+                        "frame {frame}: {} left / {} right objects, {} pairs, {} measured, {} live tracks",
+                        counts.left_objects,
+                        counts.right_objects,
+                        counts.pairs,
+                        counts.measured,
+                        counts.live_tracks
+                    );
+                }
                 events.push(*e);
             }
         })
         .map_err(|e| {
             InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
         })?;
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     let t = Instant::now();
     pipe.finish(&mut |e| events.push(*e));
     secs[6] += t.elapsed().as_secs_f64();
@@ -268,7 +297,12 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     let stats = pipe.stats();
     let frames = setup.haul.frames.len() as u32;
     let written = write_outputs(&setup, out, &events, opts)?;
+    if opts.overlays {
+        crate::overlay::write_all(&setup, out, &events, &written.fish)?;
+        crate::plot::write_haul_plot(&setup.haul.dir, out, &written.fish)?;
+    }
     let timings: BTreeMap<&str, f64> = STAGES.iter().copied().zip(secs).collect();
+    // Last: summary.json marks the output folder complete.
     write_summary(&setup, out, &written, &stats, &timings, total)?;
     Ok(HaulOutcome {
         fish: written.fish.len(),
@@ -279,6 +313,7 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
             .count(),
         frames,
         seconds_per_frame: total / frames.max(1) as f64,
+        lengths: written.fish.iter().filter_map(|f| f.length_mm).collect(),
     })
 }
 
@@ -484,40 +519,11 @@ fn write_summary(
     write_json(&out.join("summary.json"), &summary)
 }
 
-/// `fishtrack track HAUL... --out OUT`.
+/// `fishtrack track HAUL... --out OUT`: one haul into OUT, several into
+/// `OUT/<haul name>/` each plus `OUT/survey.csv` ([`crate::survey`]).
 pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
-    if opts.overlays {
-        return Err(InputError::plain("--overlays", "overlays are not built yet").into());
-    }
     if let Some(t) = &opts.tracker {
         parse_tracker(t)?;
     }
-    let many = hauls.len() > 1;
-    for h in hauls {
-        let dest = if many {
-            let name = h
-                .file_name()
-                .map(|n| n.to_owned())
-                .or_else(|| {
-                    h.canonicalize()
-                        .ok()
-                        .and_then(|p| p.file_name().map(|n| n.to_owned()))
-                })
-                .unwrap_or_else(|| "haul".into());
-            out.join(name)
-        } else {
-            out.to_path_buf()
-        };
-        let o = track_haul(h, &dest, opts)?;
-        println!(
-            "{}: {} frames, {} fish ({} measured), {:.2} s/frame → {}",
-            h.display(),
-            o.frames,
-            o.fish,
-            o.measured,
-            o.seconds_per_frame,
-            dest.display()
-        );
-    }
-    Ok(())
+    crate::survey::run(hauls, out, opts)
 }

@@ -229,7 +229,7 @@ fn bad_input_exits_2_naming_the_file() {
         "{err}"
     );
 
-    // unknown tracker, and overlays (not built yet)
+    // unknown tracker
     let out = track(
         &[haul()],
         &tmp.path().join("o4"),
@@ -237,6 +237,10 @@ fn bad_input_exits_2_naming_the_file() {
     );
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     assert!(text(&out.stderr).contains("--tracker"));
-    let out = track(&[haul()], &tmp.path().join("o5"), &["--overlays"]);
-    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    // --overlays: one picture per frame and the length-frequency plot
+    let o5 = tmp.path().join("o5");
+    let out = track(&[haul()], &o5, &["--overlays"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(o5.join("overlays/000001.png").is_file());
+    assert!(o5.join("length_frequency.svg").is_file() && o5.join("length_frequency.png").is_file());
 }

@@ -9,8 +9,9 @@
 //! flow sequence may span several lines. Other nested mappings are skipped.
 //! Numbers follow YAML: `1.`, `-2.5e-03`, `.Nan`, `.Inf`, `-.Inf`.
 //!
-//! Written: exactly the layout `cv2.FileStorage` writes for double matrices
-//! (`%YAML:1.0`, `---`, 3-space indent, `dt: d`, full-precision numbers).
+//! Written: exactly the bytes `cv2.FileStorage` writes for double matrices
+//! (`%YAML:1.0`, `---`, 3-space indent, `dt: d`, `%.17g` numbers, OpenCV's
+//! line wrapping); `synth` writes its `calibration.yml` through this writer.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -231,10 +232,17 @@ pub fn parse(path: &Path, text: &str) -> Result<BTreeMap<String, Node>, InputErr
     Ok(out)
 }
 
-/// Formats an `f64` the way OpenCV's FileStorage does for doubles: the
-/// shortest text that reads back to the same value, with a `.` always
-/// present (`1.`, `0.`, `-2.5e-07`), `.Nan` / `.Inf` for non-finite values.
-pub fn format_f64(v: f64) -> String {
+/// OpenCV's YAML wrap margin (`CV_FS_MAX_LEN`-based flow-sequence wrap).
+const WRAP_MARGIN: usize = 71;
+/// Indent of a continuation line inside a matrix's `data: [ … ]`.
+const DATA_INDENT: usize = 7;
+
+/// Formats a double as OpenCV's FileStorage does (`icvDoubleToString`):
+/// integral values below 2³¹ as `%d.` (`1.`, `0.`, `-3.`), others as C's
+/// `%.17g` (`0.050000000000000003`, `9.9999999999999995e-21`), `.Nan`,
+/// `.Inf`, `-.Inf` for non-finite values. `%.17g` reads back to the same
+/// `f64`, so a written calibration round-trips bit-exactly.
+pub fn format_double(v: f64) -> String {
     if v.is_nan() {
         return ".Nan".into();
     }
@@ -245,19 +253,36 @@ pub fn format_f64(v: f64) -> String {
             "-.Inf".into()
         };
     }
-    let s = format!("{v:?}"); // shortest round-trip representation
-    if let Some(rest) = s.strip_suffix(".0") {
-        if !rest.contains('e') {
-            return format!("{rest}.");
-        }
+    let rounded = v.round();
+    if rounded == v && rounded.abs() < 2_147_483_647.0 {
+        return format!("{}.", rounded as i64);
     }
-    if s.contains('e') && !s.contains('.') {
-        // 1e-7 -> 1.e-07 style
-        if let Some((m, e)) = s.split_once('e') {
-            return format!("{m}.e{e}");
-        }
+    format_g17(v)
+}
+
+/// C's `%.17g`.
+fn format_g17(v: f64) -> String {
+    const P: i32 = 17;
+    // Exponent after rounding to P significant digits.
+    let sci = format!("{:.*e}", (P - 1) as usize, v);
+    let (mant, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    if !(-4..P).contains(&exp) {
+        let mant = trim_zeros(mant);
+        let sign = if exp < 0 { '-' } else { '+' };
+        format!("{mant}e{sign}{:02}", exp.abs())
+    } else {
+        let decimals = (P - 1 - exp).max(0) as usize;
+        trim_zeros(&format!("{v:.decimals$}")).to_string()
     }
-    s
+}
+
+fn trim_zeros(s: &str) -> &str {
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        s
+    }
 }
 
 /// Writes the header of a FileStorage YAML file.
@@ -270,16 +295,33 @@ pub fn write_int(out: &mut String, key: &str, v: i64) {
     let _ = writeln!(out, "{key}: {v}");
 }
 
-/// Appends a `rows × cols` double matrix as an `!!opencv-matrix` node
-/// (four values per line, continuation lines indented like OpenCV's).
+/// Appends a `rows × cols` double matrix as an `!!opencv-matrix` node, laid
+/// out byte for byte as `cv2.FileStorage` writes it: 3-space indent, `dt: d`,
+/// numbers by [`format_double`], the `data` flow sequence wrapped at OpenCV's
+/// margin of 71 columns with a 7-space continuation indent.
 pub fn write_matrix(out: &mut String, key: &str, rows: usize, cols: usize, data: &[f64]) {
     let _ = writeln!(out, "{key}: !!opencv-matrix");
     let _ = writeln!(out, "   rows: {rows}");
     let _ = writeln!(out, "   cols: {cols}");
     let _ = writeln!(out, "   dt: d");
-    let tokens: Vec<String> = data.iter().map(|v| format_f64(*v)).collect();
-    let lines: Vec<String> = tokens.chunks(4).map(|c| c.join(", ")).collect();
-    let _ = writeln!(out, "   data: [ {} ]", lines.join(",\n       "));
+    let mut line = String::from("   data: [");
+    for (i, v) in data.iter().enumerate() {
+        let s = format_double(*v);
+        if i > 0 {
+            line.push(',');
+        }
+        let new_offset = line.len() + s.len();
+        if i > 0 && new_offset > WRAP_MARGIN && new_offset - DATA_INDENT > 10 {
+            out.push_str(&line);
+            out.push('\n');
+            line = " ".repeat(DATA_INDENT);
+        } else {
+            line.push(' ');
+        }
+        line.push_str(&s);
+    }
+    line.push_str(" ]\n");
+    out.push_str(&line);
 }
 
 #[cfg(test)]
@@ -345,6 +387,35 @@ mod tests {
             }
         );
         assert_eq!(m["image_width"], Node::Number(320.0));
+    }
+
+    #[test]
+    fn doubles_format_as_opencv() {
+        assert_eq!(format_double(0.0), "0.");
+        assert_eq!(format_double(-0.0), "0.");
+        assert_eq!(format_double(1.0), "1.");
+        assert_eq!(format_double(123456789.0), "123456789.");
+        assert_eq!(format_double(1967.123456789012), "1967.1234567890119");
+        assert_eq!(format_double(-0.1234567890123), "-0.12345678901230001");
+        assert_eq!(format_double(0.05), "0.050000000000000003");
+        assert_eq!(format_double(1e-4), "0.0001");
+        assert_eq!(format_double(-2e-4), "-0.00020000000000000001");
+        assert_eq!(format_double(1e-20), "9.9999999999999995e-21");
+        assert_eq!(format_double(1.0 / 3.0), "0.33333333333333331");
+        assert_eq!(format_double(1023.5), "1023.5");
+        assert_eq!(format_double(f64::NAN), ".Nan");
+        assert_eq!(format_double(f64::NEG_INFINITY), "-.Inf");
+    }
+
+    proptest::proptest! {
+        /// `%.17g` reads back to the same double.
+        #[test]
+        fn formatted_doubles_read_back_exactly(bits in proptest::prelude::any::<u64>()) {
+            let v = f64::from_bits(bits);
+            proptest::prop_assume!(v.is_finite());
+            let back = parse_number(&format_double(v)).unwrap();
+            proptest::prop_assert_eq!(back.to_bits(), (v + 0.0).to_bits());
+        }
     }
 
     proptest::proptest! {

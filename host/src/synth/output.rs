@@ -183,14 +183,18 @@ pub fn write_haul(dir: &Path, config: &SynthConfig) -> anyhow::Result<Truth> {
             .with_context(|| format!("cannot create {}", dir.join(sub).display()))?;
     }
     let (w, h) = (haul.rig.width, haul.rig.height);
+    let bar = crate::progress::bar(2 * u64::from(config.frames), "synth", "views");
     let views = render_all(&haul, |frame, cam, pixels| {
         let sub = match cam {
             Cam::Left => "left",
             Cam::Right => "right",
         };
         let png = encode_png(w, h, pixels)?;
-        write_atomic(&dir.join(sub).join(frame_name(frame)), &png)
+        write_atomic(&dir.join(sub).join(frame_name(frame)), &png)?;
+        bar.inc(1);
+        Ok(())
     })?;
+    bar.finish_and_clear();
     let truth = build_truth(&haul, &views);
     write_atomic(
         &dir.join("calibration.yml"),
