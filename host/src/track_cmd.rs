@@ -40,7 +40,7 @@ use crate::error::InputError;
 use crate::haul::{FramePair, Haul};
 use crate::output::{
     write_detections, write_fish, write_json, write_stereo, write_tracks, write_viame,
-    DetectionRow, FishOut, StereoOut, TrackRow,
+    DetectionRow, FishOut, StereoRow, TrackRow,
 };
 use crate::rectify::{RectifiedCamera, Rectifier};
 
@@ -142,7 +142,30 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
 impl Setup {
     /// The pipeline configuration of this haul.
     pub fn pipeline_config(&self) -> PipelineConfig {
-        PipelineConfig::new(self.params, self.geometry, self.width, self.height)
+        let mut c = PipelineConfig::new(self.params, self.geometry, self.width, self.height);
+        let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
+        if let Some(v) = env("XP_EVERY") {
+            c.length.snake_every_end = v > 0.0;
+        }
+        if let Some(v) = env("XP_LEVEL") {
+            c.length.snake.level_fraction = v;
+        }
+        if let Some(v) = env("XP_DEV") {
+            c.length.max_end_disagreement = v;
+        }
+        if let Some(v) = env("XP_TAILF") {
+            c.length.max_tail_fraction = v;
+        }
+        if let Some(v) = env("XP_BOTH") {
+            c.length.snake_both_views = v > 0.0;
+        }
+        if let Some(v) = env("XP_FILL") {
+            c.length.min_fin_fill = v;
+        }
+        if let Some(v) = env("XP_COMP") {
+            c.params.tail_compensation = v > 0.0;
+        }
+        c
     }
 
     /// Loads and rectifies one frame pair.
@@ -299,6 +322,7 @@ fn write_outputs(
     let rect = &setup.rectifier;
     let mut dets = Vec::new();
     let mut stereo = Vec::new();
+    let mut debug: Vec<serde_json::Value> = Vec::new();
     let mut tracks = Vec::new();
     let mut fish = Vec::new();
     let mut duplicates = BTreeSet::new();
@@ -324,15 +348,40 @@ fn write_outputs(
                     conf: 1.0,
                     length_px: (len_px > 0.0).then_some(len_px),
                 });
-                let fl = st.and_then(|s| s.length);
-                stereo.push(StereoOut {
+                let fl_all = st.and_then(|s| s.length);
+                let fl = fl_all.filter(|l| l.consistent);
+                if let (Some(l), Ok(_)) = (fl_all, std::env::var("FISHTRACK_STEREO_DEBUG")) {
+                    let g = &setup.geometry;
+                    let alt: Vec<[f64; 3]> = l
+                        .ends
+                        .iter()
+                        .map(|e| {
+                            g.triangulate(e.px.0, e.px.1, e.mask_d)
+                                .map(|p| raw_point(rect, &[p.x, p.y, p.z]))
+                                .unwrap_or([0.0; 3])
+                        })
+                        .collect();
+                    let ends: Vec<serde_json::Value> = l
+                        .ends
+                        .iter()
+                        .map(|e| {
+                            serde_json::json!({
+                        "px": [e.px.0, e.px.1], "d": e.d, "mask_d": e.mask_d, "ratio": e.sad_ratio,
+                        "mismatch": e.mismatch, "comp": e.compensated, "dev": e.mask_dev})
+                        })
+                        .collect();
+                    debug.push(serde_json::json!({"frame": frame, "left": raw_box(&rect.left, &bbox),
+                        "ends": ends, "alt": alt, "slope": l.slope, "blocks": l.blocks,
+                        "d_o": st.map(|s| s.pair.d_o), "consistent": l.consistent, "length": l.length_mm}));
+                }
+                stereo.push(StereoRow::new(
                     frame,
-                    left: lb,
-                    right: st.map(|s| raw_box(&rect.right, &s.right_box)),
-                    head: fl.map(|l| raw_point(rect, &l.ends[0].xyz)),
-                    tail: fl.map(|l| raw_point(rect, &l.ends[1].xyz)),
-                    length_mm: fl.map(|l| l.length_mm as f64),
-                });
+                    lb,
+                    st.map(|s| raw_box(&rect.right, &s.right_box)),
+                    fl.map(|l| raw_point(rect, &l.ends[0].xyz)),
+                    fl.map(|l| raw_point(rect, &l.ends[1].xyz)),
+                    fl.map(|l| l.length_mm as f64),
+                ));
             }
             PipelineEvent::TrackFrame {
                 track,
@@ -389,6 +438,12 @@ fn write_outputs(
         FPS,
     )?;
     write_stereo(&out.join("stereo.csv"), &stereo)?;
+    if !debug.is_empty() {
+        std::fs::write(
+            out.join("stereo_debug.json"),
+            serde_json::to_string(&debug)?,
+        )?;
+    }
     Ok(Written {
         tracks: tracks.len(),
         detections: dets.len(),
@@ -456,6 +511,7 @@ fn write_summary(
             "stereo_pairs": stats.pairs,
             "pairs_measured": stats.measured,
             "length_failed": stats.length_failed,
+            "length_withheld": stats.length_withheld,
             "tracks_born": t.targets_born,
             "tracks_closed": t.tracks_closed,
             "duplicate_tracks": w.duplicates,
