@@ -2,7 +2,7 @@
 //! on the haul's rectified frames (DESIGN.md, "Float reference"):
 //! segmentation of both views ([`crate::reference::compare`]: thresholds
 //! within 1 grey level, identical object sets, mask IoU ≥ 0.99), stereo
-//! pairs and lengths ([`crate::reference_stereo::compare`] on the core's
+//! pairs and lengths ([`crate::reference::stereo::compare`] on the core's
 //! objects: identical pairs, lengths within 0.5 %), and track assignments
 //! ([`crate::reference_track`] on the observations the pipeline built:
 //! identical). Prints an agreement table; any disagreement is an error
@@ -15,7 +15,7 @@ use anyhow::Result;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
 use crate::reference::compare::compare_segmentation;
-use crate::reference_stereo::{self as rs, Geometry, Gray, Limits};
+use crate::reference::stereo::{self as rs, Geometry, Gray, Limits};
 use crate::reference_track::{self as rt, Assignment, Capacities};
 use crate::track_cmd::{new_pipeline, prepare, views, TrackOptions};
 

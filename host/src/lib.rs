@@ -17,7 +17,8 @@ pub mod output;
 pub mod params_file;
 pub mod rectify;
 pub mod reference;
-pub mod reference_stereo;
+/// The stereo float reference under its former path.
+pub use reference::stereo as reference_stereo;
 pub mod reference_track;
 pub mod synth;
 pub mod timing;

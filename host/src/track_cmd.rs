@@ -142,30 +142,7 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
 impl Setup {
     /// The pipeline configuration of this haul.
     pub fn pipeline_config(&self) -> PipelineConfig {
-        let mut c = PipelineConfig::new(self.params, self.geometry, self.width, self.height);
-        let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
-        if let Some(v) = env("XP_EVERY") {
-            c.length.snake_every_end = v > 0.0;
-        }
-        if let Some(v) = env("XP_LEVEL") {
-            c.length.snake.level_fraction = v;
-        }
-        if let Some(v) = env("XP_DEV") {
-            c.length.max_end_disagreement = v;
-        }
-        if let Some(v) = env("XP_TAILF") {
-            c.length.max_tail_fraction = v;
-        }
-        if let Some(v) = env("XP_BOTH") {
-            c.length.snake_both_views = v > 0.0;
-        }
-        if let Some(v) = env("XP_FILL") {
-            c.length.min_fin_fill = v;
-        }
-        if let Some(v) = env("XP_COMP") {
-            c.params.tail_compensation = v > 0.0;
-        }
-        c
+        PipelineConfig::new(self.params, self.geometry, self.width, self.height)
     }
 
     /// Loads and rectifies one frame pair.
@@ -322,7 +299,6 @@ fn write_outputs(
     let rect = &setup.rectifier;
     let mut dets = Vec::new();
     let mut stereo = Vec::new();
-    let mut debug: Vec<serde_json::Value> = Vec::new();
     let mut tracks = Vec::new();
     let mut fish = Vec::new();
     let mut duplicates = BTreeSet::new();
@@ -348,32 +324,8 @@ fn write_outputs(
                     conf: 1.0,
                     length_px: (len_px > 0.0).then_some(len_px),
                 });
-                let fl_all = st.and_then(|s| s.length);
-                let fl = fl_all.filter(|l| l.consistent);
-                if let (Some(l), Ok(_)) = (fl_all, std::env::var("FISHTRACK_STEREO_DEBUG")) {
-                    let g = &setup.geometry;
-                    let alt: Vec<[f64; 3]> = l
-                        .ends
-                        .iter()
-                        .map(|e| {
-                            g.triangulate(e.px.0, e.px.1, e.mask_d)
-                                .map(|p| raw_point(rect, &[p.x, p.y, p.z]))
-                                .unwrap_or([0.0; 3])
-                        })
-                        .collect();
-                    let ends: Vec<serde_json::Value> = l
-                        .ends
-                        .iter()
-                        .map(|e| {
-                            serde_json::json!({
-                        "px": [e.px.0, e.px.1], "d": e.d, "mask_d": e.mask_d, "ratio": e.sad_ratio,
-                        "mismatch": e.mismatch, "comp": e.compensated, "dev": e.mask_dev})
-                        })
-                        .collect();
-                    debug.push(serde_json::json!({"frame": frame, "left": raw_box(&rect.left, &bbox),
-                        "ends": ends, "alt": alt, "slope": l.slope, "blocks": l.blocks,
-                        "d_o": st.map(|s| s.pair.d_o), "consistent": l.consistent, "length": l.length_mm}));
-                }
+                // lengths whose views disagree are withheld (core::length)
+                let fl = st.and_then(|s| s.length).filter(|l| l.consistent);
                 stereo.push(StereoRow::new(
                     frame,
                     lb,
@@ -438,12 +390,6 @@ fn write_outputs(
         FPS,
     )?;
     write_stereo(&out.join("stereo.csv"), &stereo)?;
-    if !debug.is_empty() {
-        std::fs::write(
-            out.join("stereo_debug.json"),
-            serde_json::to_string(&debug)?,
-        )?;
-    }
     Ok(Written {
         tracks: tracks.len(),
         detections: dets.len(),
