@@ -148,7 +148,7 @@ impl Default for LengthConfig {
             max_end_disagreement: 0.04,
             max_tail_fraction: 0.25,
             snake_both_views: true,
-            min_fin_fill: 0.08,
+            min_fin_fill: 0.15,
         }
     }
 }

@@ -485,6 +485,20 @@ impl<
         self.lengths.clear();
         let (w, h) = (left.width() as u32, left.height() as u32);
         for p in self.pairs.pairs.iter() {
+            // a fish cut by a border has no length to measure (Section IV.D.2)
+            let inside = match (
+                self.left.items.get(p.left as usize),
+                self.right.items.get(p.right as usize),
+            ) {
+                (Some(lo), Some(ro)) => {
+                    wholly_inside(&lo.bbox, &ro.bbox, w, h, self.cfg.inside_margin)
+                }
+                _ => false,
+            };
+            if !inside {
+                let _ = self.lengths.push(None);
+                continue;
+            }
             let l = measure_length::<N, R, REFINE_BLOCKS>(
                 &left,
                 &right,

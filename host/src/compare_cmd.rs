@@ -12,6 +12,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use fishtrack_core::length::wholly_inside;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
 use crate::reference::compare::compare_segmentation;
@@ -105,7 +106,19 @@ pub fn run(dir: &Path) -> Result<()> {
         let reference: Vec<(usize, usize, Option<f64>)> = ref_pairs
             .iter()
             .map(|p| {
-                let len = rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length);
+                // lengths are measured for pairs wholly inside both views only
+                let inside = match (
+                    pipe.left_objects().items.get(p.left),
+                    pipe.right_objects().items.get(p.right),
+                ) {
+                    (Some(a), Some(b)) => {
+                        wholly_inside(&a.bbox, &b.bbox, l.width(), l.height(), cfg.inside_margin)
+                    }
+                    _ => false,
+                };
+                let len = inside
+                    .then(|| rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length))
+                    .flatten();
                 (p.left, p.right, len.map(|v| v.length))
             })
             .collect();
