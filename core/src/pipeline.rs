@@ -140,10 +140,18 @@ pub struct StereoInfo {
     pub right_box: Roi,
     /// The pair as stereo pairing found it.
     pub pair: StereoPair,
-    /// The length measurement, if it succeeded.
+    /// The length measurement, if it succeeded (its length is usable only
+    /// when [`FishLength::consistent`]; see [`StereoInfo::length_mm`]).
     pub length: Option<FishLength>,
     /// Both boxes keep the margin from every border (length usable).
     pub wholly_inside: bool,
+}
+
+impl StereoInfo {
+    /// The usable length, mm: measured and consistent between the views.
+    pub fn length_mm(&self) -> Option<f32> {
+        self.length.filter(|l| l.consistent).map(|l| l.length_mm)
+    }
 }
 
 /// Per-frame counters.
@@ -250,6 +258,9 @@ pub struct PipelineStats {
     pub measured: u32,
     /// Pairs whose length measurement failed.
     pub length_failed: u32,
+    /// Lengths measured but withheld: the two views' masks disagree at an
+    /// end ([`crate::length::FishLength::consistent`]).
+    pub length_withheld: u32,
     /// Observations that did not fit the frame's `N`.
     pub observations_dropped: u32,
     /// Track frames whose frame had left the history ring (no box/length).
@@ -474,6 +485,20 @@ impl<
         self.lengths.clear();
         let (w, h) = (left.width() as u32, left.height() as u32);
         for p in self.pairs.pairs.iter() {
+            // a fish cut by a border has no length to measure (Section IV.D.2)
+            let inside = match (
+                self.left.items.get(p.left as usize),
+                self.right.items.get(p.right as usize),
+            ) {
+                (Some(lo), Some(ro)) => {
+                    wholly_inside(&lo.bbox, &ro.bbox, w, h, self.cfg.inside_margin)
+                }
+                _ => false,
+            };
+            if !inside {
+                let _ = self.lengths.push(None);
+                continue;
+            }
             let l = measure_length::<N, R, REFINE_BLOCKS>(
                 &left,
                 &right,
@@ -485,7 +510,12 @@ impl<
                 &self.cfg.length,
             );
             let l = match l {
-                Ok(v) => Some(v),
+                Ok(v) => {
+                    if !v.consistent {
+                        self.stats.length_withheld = self.stats.length_withheld.saturating_add(1);
+                    }
+                    Some(v)
+                }
                 Err(_) => {
                     self.stats.length_failed = self.stats.length_failed.saturating_add(1);
                     None
@@ -535,7 +565,7 @@ impl<
             if self.observations.push(obs).is_err() {
                 self.stats.observations_dropped = self.stats.observations_dropped.saturating_add(1);
             }
-            let length_mm = stereo.and_then(|s| s.length).map(|l| l.length_mm);
+            let length_mm = stereo.and_then(|s| s.length_mm());
             if length_mm.is_some() {
                 counts.measured += 1;
             }

@@ -10,6 +10,9 @@
 //! Aggregation (a robust line of disparity along the fish axis) is done by
 //! the caller, [`crate::length`].
 //!
+//! The grid is spaced out (blocks stay `B_s × B_s`) so that it never holds
+//! more than `B` blocks ([`grid_step_for`]).
+//!
 //! Memory bound: `B` blocks of 16 bytes (const generic) and one row of
 //! `MAX_GRID_COLS` coverage counters on the stack. Work: blocks ·
 //! `(2r + 1)` · `B_s²` absolute differences, counted in [`Refined::sad_ops`].
@@ -50,6 +53,24 @@ pub struct Refined<const B: usize> {
     pub sad_ops: u64,
 }
 
+/// Smallest grid step `s` with `⌊w/s⌋·⌊h/s⌋ ≤ cap` blocks, from
+/// `s = ⌈√(w·h/cap)⌉` upwards (at most a few steps).
+pub fn grid_step_for(w: u32, h: u32, cap: usize) -> u32 {
+    let cap = cap.max(1) as u64;
+    let area = w as u64 * h as u64;
+    let mut s = 1u64;
+    while s * s * cap < area {
+        s += 1;
+        if s > 1 << 16 {
+            break;
+        }
+    }
+    while s < 1 << 16 && (w as u64 / s) * (h as u64 / s) > cap {
+        s += 1;
+    }
+    s as u32
+}
+
 /// Refines the disparity of one object (mask `runs`, upright box `bbox`)
 /// around the coarse disparity `d_o`.
 pub fn refine_disparity<const B: usize>(
@@ -72,8 +93,12 @@ pub fn refine_disparity<const B: usize>(
     let range = range.min(1024) as i32;
     let d0 = micromath::F32(d_o).round().0;
     let d0 = d0.clamp(-65_536.0, 65_536.0) as i32;
-    // grid step: the block size, or wider for very wide objects
-    let step = block.max(bbox.w.div_ceil(MAX_GRID_COLS as u32));
+    // grid step: the block size, or wider for very wide objects, and wide
+    // enough that the whole grid fits `B` (a truncated grid would keep only
+    // the top rows of a large object and bias the disparity line)
+    let step = block
+        .max(bbox.w.div_ceil(MAX_GRID_COLS as u32))
+        .max(grid_step_for(bbox.w, bbox.h, B));
     let cols = (bbox.w / step) as usize;
     let rows = bbox.h / step;
     let x_off = bbox.x + (bbox.w - cols as u32 * step) / 2;
@@ -158,6 +183,59 @@ mod tests {
     fn tex(x: i32, y: i32) -> u8 {
         let h = (x.wrapping_mul(73856093) ^ y.wrapping_mul(19349663)) as u32;
         (40 + (h >> 7) % 150) as u8
+    }
+
+    #[test]
+    fn grid_step_keeps_the_grid_within_capacity() {
+        for (w, h, cap) in [
+            (800u32, 300u32, 1024usize),
+            (2048, 2048, 1024),
+            (8, 8, 1),
+            (5, 3, 64),
+            (1000, 10, 16),
+        ] {
+            let s = grid_step_for(w, h, cap);
+            assert!(
+                (w / s) as usize * (h / s) as usize <= cap,
+                "{w}x{h} cap {cap}: step {s}"
+            );
+            // the smallest such step, or the area bound
+            if s > 1 {
+                let t = s - 1;
+                assert!(
+                    (w / t) as usize * (h / t) as usize > cap
+                        || (t as u64).pow(2) * (cap as u64) < (w as u64 * h as u64),
+                    "{w}x{h} cap {cap}: step {s} not minimal"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_large_object_is_sampled_over_its_whole_height() {
+        let (w, h) = (400usize, 200usize);
+        let d = 11i32;
+        let mut l = vec![0u8; w * h];
+        let mut r = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                l[y * w + x] = tex(x as i32, y as i32);
+                r[y * w + x] = tex(x as i32 + d, y as i32);
+            }
+        }
+        let lv = ImageView::packed(&l, w, h).unwrap();
+        let rv = ImageView::packed(&r, w, h).unwrap();
+        let runs: Vec<Run> = (0..200).map(|y| Run { y, x0: 40, x1: 400 }).collect();
+        // 45 × 25 grid cells of 8 px would be 1125 blocks: 64 fit
+        let out = refine_disparity::<64>(&lv, &rv, &runs, Roi::new(40, 0, 360, 200), 12.0, 8, 16)
+            .unwrap();
+        assert_eq!(out.dropped, 0);
+        assert!(out.blocks.len() >= 32, "{}", out.blocks.len());
+        let ys: Vec<f32> = out.blocks.iter().map(|b| b.y).collect();
+        let (lo, hi) = ys
+            .iter()
+            .fold((f32::MAX, f32::MIN), |a, &y| (a.0.min(y), a.1.max(y)));
+        assert!(lo < 40.0 && hi > 140.0, "rows {lo}..{hi}");
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! on the haul's rectified frames (DESIGN.md, "Float reference"):
 //! segmentation of both views ([`crate::reference::compare`]: thresholds
 //! within 1 grey level, identical object sets, mask IoU ≥ 0.99), stereo
-//! pairs and lengths ([`crate::reference_stereo::compare`] on the core's
+//! pairs and lengths ([`crate::reference::stereo::compare`] on the core's
 //! objects: identical pairs, lengths within 0.5 %), and track assignments
 //! ([`crate::reference::track`] on the observations the pipeline built:
 //! identical). Prints an agreement table; any disagreement is an error
@@ -12,11 +12,12 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use fishtrack_core::length::wholly_inside;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
 use crate::reference::compare::compare_segmentation;
+use crate::reference::stereo::{self as rs, Geometry, Gray, Limits};
 use crate::reference::track::{self as rt, Assignment, Capacities};
-use crate::reference_stereo::{self as rs, Geometry, Gray, Limits};
 use crate::track_cmd::{new_pipeline, prepare, views, TrackOptions};
 
 #[derive(Default)]
@@ -105,7 +106,19 @@ pub fn run(dir: &Path) -> Result<()> {
         let reference: Vec<(usize, usize, Option<f64>)> = ref_pairs
             .iter()
             .map(|p| {
-                let len = rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length);
+                // lengths are measured for pairs wholly inside both views only
+                let inside = match (
+                    pipe.left_objects().items.get(p.left),
+                    pipe.right_objects().items.get(p.right),
+                ) {
+                    (Some(a), Some(b)) => {
+                        wholly_inside(&a.bbox, &b.bbox, l.width(), l.height(), cfg.inside_margin)
+                    }
+                    _ => false,
+                };
+                let len = inside
+                    .then(|| rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length))
+                    .flatten();
                 (p.left, p.right, len.map(|v| v.length))
             })
             .collect();

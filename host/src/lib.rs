@@ -20,7 +20,8 @@ pub mod plot;
 pub mod progress;
 pub mod rectify;
 pub mod reference;
-pub mod reference_stereo;
+/// The stereo float reference under its former path.
+pub use reference::stereo as reference_stereo;
 pub mod survey;
 pub mod synth;
 pub mod timing;

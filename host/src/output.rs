@@ -63,22 +63,8 @@ pub struct FishOut {
     pub range_mm: Option<f64>,
 }
 
-/// One `stereo.csv` row: a left object in one frame with its stereo result.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StereoOut {
-    /// Frame, from 1.
-    pub frame: u32,
-    /// Left box, raw left pixels.
-    pub left: [f64; 4],
-    /// Right box, raw right pixels, if paired.
-    pub right: Option<[f64; 4]>,
-    /// Head point, mm.
-    pub head: Option<[f64; 3]>,
-    /// Tail point, mm.
-    pub tail: Option<[f64; 3]>,
-    /// Length, mm.
-    pub length_mm: Option<f64>,
-}
+/// One `stereo.csv` row: the same type `fishtrack eval` reads.
+pub use crate::eval::io::StereoRow;
 
 /// Writes `path` atomically: `fill` writes the contents into a temporary
 /// file in the same directory, which is synced and renamed over `path`.
@@ -203,32 +189,16 @@ pub fn write_fish(path: &Path, rows: &[FishOut]) -> Result<()> {
     })
 }
 
-/// `stereo.csv`, with its header row (format: [`crate::eval::io::StereoRow`]).
-pub fn write_stereo(path: &Path, rows: &[StereoOut]) -> Result<()> {
+/// `stereo.csv`, with its header row (format: [`StereoRow`], written
+/// through serde; the header is written even when there are no rows).
+pub fn write_stereo(path: &Path, rows: &[StereoRow]) -> Result<()> {
     write_atomic(path, |w| {
         writeln!(w, "{}", STEREO_HEADER.join(","))?;
+        let mut cw = csv::WriterBuilder::new().has_headers(false).from_writer(w);
         for r in rows {
-            let right = r
-                .right
-                .map(|b| b.map(num).join(","))
-                .unwrap_or_else(|| ",,,".into());
-            let head = r
-                .head
-                .map(|b| b.map(num).join(","))
-                .unwrap_or_else(|| ",,".into());
-            let tail = r
-                .tail
-                .map(|b| b.map(num).join(","))
-                .unwrap_or_else(|| ",,".into());
-            writeln!(
-                w,
-                "{},{},{right},{head},{tail},{}",
-                r.frame,
-                r.left.map(num).join(","),
-                opt(r.length_mm)
-            )?;
+            cw.serialize(r).map_err(std::io::Error::other)?;
         }
-        Ok(())
+        cw.flush()
     })
 }
 
@@ -337,27 +307,34 @@ mod tests {
         assert_eq!(f[0].length_sd_mm, None);
 
         let st = vec![
-            StereoOut {
-                frame: 1,
-                left: [1.0, 2.0, 3.0, 4.0],
-                right: None,
-                head: None,
-                tail: None,
-                length_mm: None,
-            },
-            StereoOut {
-                frame: 2,
-                left: [1.0, 2.0, 3.0, 4.0],
-                right: Some([0.0, 2.0, 3.0, 4.0]),
-                head: Some([0.0, 0.0, 1000.0]),
-                tail: Some([300.0, 0.0, 1000.0]),
-                length_mm: Some(300.0),
-            },
+            StereoRow::new(1, [1.0, 2.0, 3.0, 4.0], None, None, None, None),
+            StereoRow::new(
+                2,
+                [1.0, 2.0, 3.0, 4.0],
+                Some([0.0, 2.0, 3.0, 4.0]),
+                Some([0.0, 0.0, 1000.0]),
+                Some([300.0, 0.0, 1000.00049]),
+                Some(300.0),
+            ),
         ];
         write_stereo(&dir.path().join("stereo.csv"), &st).unwrap();
         let s = read_stereo(&dir.path().join("stereo.csv")).unwrap();
-        assert_eq!(s[0].right, None);
+        assert_eq!(s[0].right(), None);
         assert_eq!(s[1].length_mm, Some(300.0));
+        assert_eq!(s[1].tail(), Some([300.0, 0.0, 1000.0]));
+        // the serde field names are the documented header, in order
+        let mut cw = csv::Writer::from_writer(Vec::new());
+        cw.serialize(&st[0]).unwrap();
+        let text = String::from_utf8(cw.into_inner().unwrap()).unwrap();
+        assert_eq!(text.lines().next().unwrap(), STEREO_HEADER.join(","));
+        // the same rows read back equal (line numbers aside)
+        let back: Vec<StereoRow> = s.into_iter().map(|r| StereoRow { line: 0, ..r }).collect();
+        assert_eq!(back, st);
+        // an empty file still carries the header
+        write_stereo(&dir.path().join("empty.csv"), &[]).unwrap();
+        assert!(read_stereo(&dir.path().join("empty.csv"))
+            .unwrap()
+            .is_empty());
 
         let det = vec![DetectionRow {
             frame: 4,

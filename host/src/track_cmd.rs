@@ -41,7 +41,7 @@ use crate::error::InputError;
 use crate::haul::{FramePair, Haul};
 use crate::output::{
     write_detections, write_fish, write_json, write_stereo, write_tracks, write_viame,
-    DetectionRow, FishOut, StereoOut, TrackRow,
+    DetectionRow, FishOut, StereoRow, TrackRow,
 };
 use crate::rectify::{RectifiedCamera, Rectifier};
 
@@ -359,15 +359,16 @@ fn write_outputs(
                     conf: 1.0,
                     length_px: (len_px > 0.0).then_some(len_px),
                 });
-                let fl = st.and_then(|s| s.length);
-                stereo.push(StereoOut {
+                // lengths whose views disagree are withheld (core::length)
+                let fl = st.and_then(|s| s.length).filter(|l| l.consistent);
+                stereo.push(StereoRow::new(
                     frame,
-                    left: lb,
-                    right: st.map(|s| raw_box(&rect.right, &s.right_box)),
-                    head: fl.map(|l| raw_point(rect, &l.ends[0].xyz)),
-                    tail: fl.map(|l| raw_point(rect, &l.ends[1].xyz)),
-                    length_mm: fl.map(|l| l.length_mm as f64),
-                });
+                    lb,
+                    st.map(|s| raw_box(&rect.right, &s.right_box)),
+                    fl.map(|l| raw_point(rect, &l.ends[0].xyz)),
+                    fl.map(|l| raw_point(rect, &l.ends[1].xyz)),
+                    fl.map(|l| l.length_mm as f64),
+                ));
             }
             PipelineEvent::TrackFrame {
                 track,
@@ -491,6 +492,7 @@ fn write_summary(
             "stereo_pairs": stats.pairs,
             "pairs_measured": stats.measured,
             "length_failed": stats.length_failed,
+            "length_withheld": stats.length_withheld,
             "tracks_born": t.targets_born,
             "tracks_closed": t.tracks_closed,
             "duplicate_tracks": w.duplicates,

@@ -407,6 +407,57 @@ fn segmentation_and_stereo_degradations() {
     write_stereo(dir.path(), &t, 1.0, Some((2, 5)));
     let st = eval(&t, dir.path()).stereo.unwrap();
     assert_eq!((st.correctly_paired, st.fish_frames), (21, 22));
+    assert_eq!((st.detected, st.wrongly_paired, st.unpaired), (22, 1, 0));
+    assert!((st.pairing_accuracy_detected - 21.0 / 22.0).abs() < 1e-12);
+    // Of the mispaired file's rows, drop one wholly-visible fish-frame (not
+    // segmented) and unpair another: 22 fish-frames, 21 detected, 1 wrong,
+    // 1 unpaired, 19 correct.
+    let text = std::fs::read_to_string(dir.path().join("stereo.csv")).unwrap();
+    let (header, body) = text.split_once('\n').unwrap();
+    let mut lines: Vec<String> = body.lines().map(String::from).collect();
+    let st_rows = fishtrack::eval::io::read_stereo(&dir.path().join("stereo.csv")).unwrap();
+    let inside: Vec<usize> = (0..st_rows.len())
+        .filter(|&k| {
+            let r = &st_rows[k];
+            let l = r.left();
+            let right = r.right().unwrap();
+            // the mispaired row (moved by 450 px) is left alone
+            t.fish.iter().any(|f| {
+                f.frames.iter().any(|a| {
+                    a.frame == r.frame
+                        && a.inside_left
+                        && a.inside_right
+                        && a.left_box == Some(l)
+                        && a.right_box == Some(right)
+                })
+            })
+        })
+        .collect();
+    let (unpair, drop) = (inside[0], inside[1]);
+    let mut f: Vec<&str> = lines[unpair].split(',').collect();
+    for v in f.iter_mut().skip(5) {
+        *v = "";
+    }
+    lines[unpair] = f.join(",");
+    lines.remove(drop);
+    std::fs::write(
+        dir.path().join("stereo.csv"),
+        format!("{header}\n{}\n", lines.join("\n")),
+    )
+    .unwrap();
+    let st = eval(&t, dir.path()).stereo.unwrap();
+    assert_eq!(
+        (
+            st.fish_frames,
+            st.detected,
+            st.correctly_paired,
+            st.wrongly_paired,
+            st.unpaired
+        ),
+        (22, 21, 19, 1, 1)
+    );
+    assert!((st.pairing_accuracy - 19.0 / 22.0).abs() < 1e-12);
+    assert!((st.pairing_accuracy_detected - 19.0 / 21.0).abs() < 1e-12);
 }
 
 #[test]

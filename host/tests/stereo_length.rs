@@ -235,12 +235,12 @@ fn length_with_and_without_tail_compensation() {
     }
 }
 
-/// The core against the f64 reference (`fishtrack::reference_stereo`):
+/// The core against the f64 reference (`fishtrack::reference::stereo`):
 /// identical pairs, lengths within 0.5 %, on the pairing scene and on every
 /// length scene (tail compensation on, eq. 15 and every-end modes).
 #[test]
 fn core_agrees_with_the_f64_reference() {
-    use fishtrack::reference_stereo as rs;
+    use fishtrack::reference::stereo as rs;
     let sc = Scene::new(1024, 640);
     let mut scenes: Vec<(Vec<Fish>, Seg)> = vec![(
         vec![

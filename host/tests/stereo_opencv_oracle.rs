@@ -5,7 +5,7 @@
 //! Without python3/cv2 the test prints a skip notice, unless
 //! `FISHTRACK_REQUIRE_PYTHON=1` (CI), where it fails.
 
-use fishtrack::reference_stereo::Geometry;
+use fishtrack::reference::stereo::Geometry;
 use fishtrack_core::StereoGeometry;
 use nalgebra::{Matrix3x4, Matrix4};
 use std::io::Write;

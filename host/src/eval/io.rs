@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::InputError;
 
@@ -61,30 +61,136 @@ pub const FISH_HEADER: [&str; 7] = [
 ];
 
 /// One row of `OUT/stereo.csv`, the per-frame stereo output (paper Sections
-/// IV.A and IV.D.2). Header:
+/// IV.A and IV.D.2) — the one type `fishtrack track` writes
+/// ([`crate::output::write_stereo`]) and `fishtrack eval` reads
+/// ([`read_stereo`]), through serde; the field names are the header
+/// ([`STEREO_HEADER`]):
 /// `frame,left_x,left_y,left_w,left_h,right_x,right_y,right_w,right_h,head_x,head_y,head_z,tail_x,tail_y,tail_z,length_mm`
 /// — one row per left object in a frame (1-based); `left_*`/`right_*` its
 /// upright boxes `[x, y, w, h]` in the raw left/right images' pixels (right
 /// fields empty when the object stayed unpaired); `head_*`/`tail_*` the
 /// triangulated snout and tail-tip points in mm in the left camera frame
-/// and `length_mm` = ‖head − tail‖ (all empty where no measurement was made,
-/// e.g. a fish cut by the border).
-#[derive(Debug, Clone, PartialEq)]
+/// and `length_mm` = ‖head − tail‖ (all empty where no usable measurement
+/// was made, e.g. a fish cut by the border or masks that disagree between
+/// the views). A group (right box, head, tail) is all present or all empty.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct StereoRow {
     /// Frame number, from 1.
     pub frame: u32,
-    /// Left box.
-    pub left: [f64; 4],
-    /// Right box of the paired object, if paired.
-    pub right: Option<[f64; 4]>,
-    /// Head point, mm.
-    pub head: Option<[f64; 3]>,
-    /// Tail point, mm.
-    pub tail: Option<[f64; 3]>,
+    /// Left box x, raw left pixels.
+    pub left_x: f64,
+    /// Left box y.
+    pub left_y: f64,
+    /// Left box width.
+    pub left_w: f64,
+    /// Left box height.
+    pub left_h: f64,
+    /// Right box x of the paired object, raw right pixels.
+    pub right_x: Option<f64>,
+    /// Right box y.
+    pub right_y: Option<f64>,
+    /// Right box width.
+    pub right_w: Option<f64>,
+    /// Right box height.
+    pub right_h: Option<f64>,
+    /// Head point x, mm.
+    pub head_x: Option<f64>,
+    /// Head point y, mm.
+    pub head_y: Option<f64>,
+    /// Head point z, mm.
+    pub head_z: Option<f64>,
+    /// Tail point x, mm.
+    pub tail_x: Option<f64>,
+    /// Tail point y, mm.
+    pub tail_y: Option<f64>,
+    /// Tail point z, mm.
+    pub tail_z: Option<f64>,
     /// Length, mm.
     pub length_mm: Option<f64>,
-    /// Line in the file (for error messages).
+    /// Line in the file (for error messages; not a column).
+    #[serde(skip)]
     pub line: u64,
+}
+
+/// Rounds to 3 decimals: sub-micrometre / sub-millipixel digits are noise.
+fn r3(v: f64) -> f64 {
+    let r = (v * 1000.0).round() / 1000.0;
+    if r == 0.0 {
+        0.0
+    } else {
+        r
+    }
+}
+
+fn all3(v: [Option<f64>; 3]) -> Option<[f64; 3]> {
+    Some([v[0]?, v[1]?, v[2]?])
+}
+
+impl StereoRow {
+    /// A row from boxes and points (values rounded to 3 decimals).
+    pub fn new(
+        frame: u32,
+        left: [f64; 4],
+        right: Option<[f64; 4]>,
+        head: Option<[f64; 3]>,
+        tail: Option<[f64; 3]>,
+        length_mm: Option<f64>,
+    ) -> Self {
+        let r = |v: Option<[f64; 4]>, k: usize| v.map(|b| r3(b[k]));
+        let p = |v: Option<[f64; 3]>, k: usize| v.map(|b| r3(b[k]));
+        StereoRow {
+            frame,
+            left_x: r3(left[0]),
+            left_y: r3(left[1]),
+            left_w: r3(left[2]),
+            left_h: r3(left[3]),
+            right_x: r(right, 0),
+            right_y: r(right, 1),
+            right_w: r(right, 2),
+            right_h: r(right, 3),
+            head_x: p(head, 0),
+            head_y: p(head, 1),
+            head_z: p(head, 2),
+            tail_x: p(tail, 0),
+            tail_y: p(tail, 1),
+            tail_z: p(tail, 2),
+            length_mm: length_mm.map(r3),
+            line: 0,
+        }
+    }
+
+    /// Left box `[x, y, w, h]`.
+    pub fn left(&self) -> [f64; 4] {
+        [self.left_x, self.left_y, self.left_w, self.left_h]
+    }
+
+    /// Right box, if paired.
+    pub fn right(&self) -> Option<[f64; 4]> {
+        Some([self.right_x?, self.right_y?, self.right_w?, self.right_h?])
+    }
+
+    /// Head point, mm.
+    pub fn head(&self) -> Option<[f64; 3]> {
+        all3([self.head_x, self.head_y, self.head_z])
+    }
+
+    /// Tail point, mm.
+    pub fn tail(&self) -> Option<[f64; 3]> {
+        all3([self.tail_x, self.tail_y, self.tail_z])
+    }
+
+    /// The optional groups: (first column index, values).
+    fn groups(&self) -> [(usize, Vec<Option<f64>>); 4] {
+        [
+            (
+                5,
+                vec![self.right_x, self.right_y, self.right_w, self.right_h],
+            ),
+            (9, vec![self.head_x, self.head_y, self.head_z]),
+            (12, vec![self.tail_x, self.tail_y, self.tail_z]),
+            (15, vec![self.length_mm]),
+        ]
+    }
 }
 
 /// The header `stereo.csv` must carry.
@@ -278,7 +384,9 @@ pub fn read_fish(path: &Path) -> Result<Vec<FishRow>, InputError> {
     Ok(rows)
 }
 
-/// Reads `stereo.csv` (header row required).
+/// Reads `stereo.csv` (header row required), checking every row: frame
+/// ≥ 1, finite numbers, boxes of non-negative size, each group all present
+/// or all empty.
 pub fn read_stereo(path: &Path) -> Result<Vec<StereoRow>, InputError> {
     let mut rdr = reader(path)?;
     check_header(path, &mut rdr, &STEREO_HEADER)?;
@@ -293,16 +401,20 @@ pub fn read_stereo(path: &Path) -> Result<Vec<StereoRow>, InputError> {
                 format!("{} columns, expected {}", rec.len(), STEREO_HEADER.len()),
             ));
         }
-        let frame = parse_frame(path, line, &rec[0])?;
-        // Fields 1.. in groups: all present or all empty.
-        let group = |from: usize, n: usize| -> Result<Option<Vec<f64>>, InputError> {
-            let fields: Vec<&str> = (from..from + n).map(|k| &rec[k]).collect();
-            if fields.iter().all(|s| s.is_empty()) {
-                return Ok(None);
+        // frame first, for its own message (1-based, whole)
+        parse_frame(path, line, &rec[0])?;
+        for (k, name) in STEREO_HEADER.iter().enumerate().skip(1) {
+            if !rec[k].is_empty() {
+                parse_f64(path, line, name, &rec[k])?;
             }
-            let mut out = Vec::with_capacity(n);
-            for (k, s) in fields.iter().enumerate() {
-                if s.is_empty() {
+        }
+        let mut row: StereoRow = rec
+            .deserialize(None)
+            .map_err(|e| at(path, line, format!("bad stereo row: {e}")))?;
+        row.line = line;
+        for (from, g) in row.groups() {
+            if g.iter().any(Option::is_some) {
+                if let Some(k) = g.iter().position(Option::is_none) {
                     return Err(at(
                         path,
                         line,
@@ -312,30 +424,13 @@ pub fn read_stereo(path: &Path) -> Result<Vec<StereoRow>, InputError> {
                         ),
                     ));
                 }
-                out.push(parse_f64(path, line, STEREO_HEADER[from + k], s)?);
             }
-            Ok(Some(out))
-        };
-        let left = group(1, 4)?
-            .ok_or_else(|| at(path, line, "the left box (left_x..left_h) is required"))?;
-        let left = [left[0], left[1], left[2], left[3]];
-        check_box(path, line, &left)?;
-        let right = group(5, 4)?.map(|r| [r[0], r[1], r[2], r[3]]);
-        if let Some(r) = &right {
-            check_box(path, line, r)?;
         }
-        let head = group(9, 3)?.map(|p| [p[0], p[1], p[2]]);
-        let tail = group(12, 3)?.map(|p| [p[0], p[1], p[2]]);
-        let length_mm = group(15, 1)?.map(|l| l[0]);
-        rows.push(StereoRow {
-            frame,
-            left,
-            right,
-            head,
-            tail,
-            length_mm,
-            line,
-        });
+        check_box(path, line, &row.left())?;
+        if let Some(r) = row.right() {
+            check_box(path, line, &r)?;
+        }
+        rows.push(row);
     }
     Ok(rows)
 }
@@ -408,9 +503,11 @@ mod tests {
             "{h}\n1,0,0,10,10,5,0,10,10,1,2,3,4,5,6,7.5\n1,0,0,10,10,,,,,,,,,,,\n"
         ));
         let rows = read_stereo(f.path()).unwrap();
-        assert_eq!(rows[0].right, Some([5.0, 0.0, 10.0, 10.0]));
+        assert_eq!(rows[0].right(), Some([5.0, 0.0, 10.0, 10.0]));
+        assert_eq!(rows[0].head(), Some([1.0, 2.0, 3.0]));
         assert_eq!(rows[0].length_mm, Some(7.5));
-        assert_eq!(rows[1].right, None);
+        assert_eq!(rows[0].line, 2);
+        assert_eq!(rows[1].right(), None);
         let f = file(&format!("{h}\n1,0,0,10,10,5,,10,10,,,,,,,\n"));
         let e = read_stereo(f.path()).unwrap_err();
         assert!(

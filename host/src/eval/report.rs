@@ -143,6 +143,19 @@ impl Table {
                 s.fish_frames
             ),
         );
+        self.row(
+            "pairing accuracy (segmented)",
+            format!(
+                "{} ({}/{})",
+                pct(s.pairing_accuracy_detected),
+                s.correctly_paired,
+                s.detected
+            ),
+        );
+        self.row(
+            "wrongly paired / unpaired",
+            format!("{} / {}", s.wrongly_paired, s.unpaired),
+        );
         self.length("per-frame 3-D length", &s.length);
     }
 }

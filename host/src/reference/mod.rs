@@ -5,4 +5,5 @@
 
 pub mod compare;
 pub mod segment;
+pub mod stereo;
 pub mod track;

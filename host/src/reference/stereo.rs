@@ -532,7 +532,8 @@ fn background(img: &Gray, b: (i64, i64, i64, i64), margin: i64) -> (f64, f64) {
     (med, 1.4826 * dev[dev.len() / 2])
 }
 
-/// The tail snake: how far beyond the end (along `u`) an accepted region reaches.
+/// The tail snake: how far beyond the end (along `u`) an accepted region
+/// reaches, and its filled area (contour area × fraction above the level).
 #[allow(clippy::too_many_arguments)]
 fn snake(
     img: &Gray,
@@ -542,7 +543,7 @@ fn snake(
     body_mean: f64,
     bg: (f64, f64),
     p: &fishtrack_core::snake::SnakeParams,
-) -> Option<f64> {
+) -> Option<(f64, f64)> {
     const K: usize = fishtrack_core::snake::SNAKE_POINTS;
     let h_o = h_o.clamp(4.0, 4096.0);
     let radius = h_o / 4.0;
@@ -654,7 +655,7 @@ fn snake(
         && n_hi as f64 / n_in as f64 >= 0.6
         && near <= radius
         && far > 1.0;
-    accepted.then_some(far)
+    accepted.then_some((far, area * (n_hi as f64 / n_in as f64)))
 }
 
 fn dist(a: (f64, f64), b: (f64, f64)) -> f64 {
@@ -684,6 +685,8 @@ pub struct RefLength {
     pub ends: [Vector3<f64>; 2],
     /// Which ends the snake extended.
     pub compensated: [bool; 2],
+    /// Both views' masks agree at every uncompensated end (the length is usable).
+    pub consistent: bool,
 }
 
 /// Options as in `core::length::LengthConfig`.
@@ -726,8 +729,11 @@ pub fn length(
     let side = h_o.round() as i64;
     let mu = p.mu_sad.max(1.0);
     let bg = background(l, lo.bbox, (h_o * 0.5) as i64);
+    let rh_o = ro.h_o.clamp(2.0, 1024.0);
+    let rbg = background(r, ro.bbox, (rh_o * 0.5) as i64);
     let mut ts = [t_lo, t_hi];
     let mut comp = [false; 2];
+    let mut mask_d = [0.0f64; 2];
     for (e, s) in [(0usize, -1.0f64), (1, 1.0)] {
         let end = (lo.centre.0 + ts[e] * u.0, lo.centre.1 + ts[e] * u.1);
         let &(re, rs) = rends.iter().min_by(|a, b| {
@@ -735,6 +741,7 @@ pub fn length(
             let db = (b.0 .0 + p.d_o - end.0).powi(2) + (b.0 .1 - end.1).powi(2);
             da.total_cmp(&db)
         })?;
+        mask_d[e] = end.0 - re.0;
         // eq. (15): end squares inside each object's end, SAD ratio to μ_SAD
         let cl = (end.0 - s * u.0 * h_o / 2.0, end.1 - s * u.1 * h_o / 2.0);
         let cr = (re.0 - rs * ru.0 * h_o / 2.0, re.1 - rs * ru.1 * h_o / 2.0);
@@ -762,12 +769,35 @@ pub fn length(
         };
         let mismatch = ratio * cfg.sad_ratio_scale as f64 > params.theta_sad as f64;
         let left_short = (re.0 + p.d_o - end.0) * s * u.0 + (re.1 - end.1) * s * u.1 > 1.0;
-        if params.tail_compensation && ((mismatch && left_short) || cfg.snake_every_end) {
-            if let Some(far) = snake(l, end, (s * u.0, s * u.1), h_o, lo.mean, bg, &cfg.snake) {
-                ts[e] += s * far;
-                comp[e] = true;
+        let flagged = mismatch && left_short;
+        if params.tail_compensation && (flagged || cfg.snake_every_end) {
+            if let Some((far, filled)) =
+                snake(l, end, (s * u.0, s * u.1), h_o, lo.mean, bg, &cfg.snake)
+            {
+                // the right view must show the same tail (unless eq. 15 flagged the end)
+                let agree = !cfg.snake_both_views
+                    || flagged
+                    || snake(
+                        r,
+                        re,
+                        (rs * ru.0, rs * ru.1),
+                        rh_o,
+                        ro.mean,
+                        rbg,
+                        &cfg.snake,
+                    )
+                    .is_some_and(|(rfar, _)| (rfar - far).abs() <= (0.3 * far).max(4.0));
+                let fan = filled >= cfg.min_fin_fill as f64 * far * h_o;
+                if agree && fan && far <= cfg.max_tail_fraction as f64 * (t_hi - t_lo) {
+                    ts[e] += s * far;
+                    comp[e] = true;
+                }
             }
         }
+    }
+    if comp[0] && comp[1] {
+        ts = [t_lo, t_hi];
+        comp = [false; 2];
     }
     // refinement on the dense grid, then the resistant line d(t)
     let blocks = refine(
@@ -807,14 +837,28 @@ pub fn length(
         (p.d_o, 0.0)
     };
     let mut ends = [Vector3::zeros(); 2];
+    let mut consistent = true;
     for e in 0..2 {
         let (x, y) = (lo.centre.0 + ts[e] * u.0, lo.centre.1 + ts[e] * u.1);
-        ends[e] = geom.triangulate(x, y, a + b * ts[e])?;
+        // the masks' own end disparity where it agrees with the line
+        let t0 = if e == 0 { t_lo } else { t_hi };
+        let d_line = a + b * t0;
+        let dev = (mask_d[e] - d_line).abs();
+        let d = if !comp[e] && dev <= cfg.mask_end_tolerance as f64 {
+            mask_d[e]
+        } else {
+            a + b * ts[e]
+        };
+        if !comp[e] && dev / d_line.abs().max(1.0) > cfg.max_end_disagreement as f64 {
+            consistent = false;
+        }
+        ends[e] = geom.triangulate(x, y, d)?;
     }
     Some(RefLength {
         length: (ends[1] - ends[0]).norm(),
         ends,
         compensated: comp,
+        consistent,
     })
 }
 
@@ -836,7 +880,16 @@ fn refine(
     if bw <= 0 || bh <= 0 || block <= 0 {
         return Vec::new();
     }
-    let step = block.max((bw + 255) / 256);
+    // the core's grid holds at most REFINE_BLOCKS blocks: the same spacing
+    let cap = fishtrack_core::pipeline::REFINE_BLOCKS as i64;
+    let mut s_cap = ((bw * bh) as f64 / cap as f64).sqrt().floor().max(1.0) as i64;
+    while s_cap * s_cap * cap < bw * bh {
+        s_cap += 1;
+    }
+    while (bw / s_cap) * (bh / s_cap) > cap {
+        s_cap += 1;
+    }
+    let step = block.max((bw + 255) / 256).max(s_cap);
     let bs = block.min(step);
     let (cols, rows) = (bw / step, bh / step);
     let (x_off, y_off) = (bx + (bw - cols * step) / 2, by + (bh - rows * step) / 2);
