@@ -147,6 +147,127 @@ fn combine<const MAX: bool>(acc: &mut [u8], src: &[u8]) {
     }
 }
 
+/// Most input rows one output row of [`reduce`] combines.
+const MAX_INPUTS: usize = 2 * MAX_SE + 1;
+
+/// Bytes per block of the reduction kernel (two SSE / one AVX register).
+const BLOCK: usize = 32;
+
+/// `out[i] = op over k of srcs[k][i]` (identity when `srcs` is empty), in
+/// one pass reading up to eight input rows: fewer than eight are padded
+/// with repeats of the first (min and max are idempotent), more are folded
+/// in by further passes. Blocks of [`BLOCK`] bytes with every slice cut to
+/// the same length carry no bounds checks and unroll into a handful of
+/// vector min/max instructions per block (one load per input, one store).
+fn reduce<const MAX: bool>(out: &mut [u8], srcs: &[&[u8]]) {
+    let n = srcs.iter().fold(out.len(), |n, s| n.min(s.len()));
+    let out = &mut out[..n];
+    let Some(&first) = srcs.first() else {
+        out.fill(identity::<MAX>());
+        return;
+    };
+    let mut eight = [first; 8];
+    for (e, &s) in eight.iter_mut().zip(srcs) {
+        *e = s;
+    }
+    reduce8::<MAX>(out, &eight);
+    for &s in srcs.iter().skip(8) {
+        combine::<MAX>(out, s);
+    }
+}
+
+/// The first `m` bytes of `s` (a multiple of [`BLOCK`]) as blocks.
+fn blocks(s: &[u8], m: usize) -> &[[u8; BLOCK]] {
+    bytemuck::cast_slice(s.get(..m).unwrap_or(&[]))
+}
+
+/// `out[i] = op of the eight rows at i` (all at least `out.len()` long).
+fn reduce8<const MAX: bool>(out: &mut [u8], r: &[&[u8]; 8]) {
+    let n = out.len();
+    let m = n - n % BLOCK;
+    let (ob, ot) = out.split_at_mut(m);
+    let ob: &mut [[u8; BLOCK]] = bytemuck::cast_slice_mut(ob);
+    let k = ob.len();
+    let (a, b, c, d) = (
+        blocks(r[0], m),
+        blocks(r[1], m),
+        blocks(r[2], m),
+        blocks(r[3], m),
+    );
+    let (e, f, g, h) = (
+        blocks(r[4], m),
+        blocks(r[5], m),
+        blocks(r[6], m),
+        blocks(r[7], m),
+    );
+    if [
+        a.len(),
+        b.len(),
+        c.len(),
+        d.len(),
+        e.len(),
+        f.len(),
+        g.len(),
+        h.len(),
+    ]
+    .iter()
+    .any(|&l| l != k)
+    {
+        return;
+    }
+    let (a, b, c, d, e, f, g, h) = (
+        &a[..k],
+        &b[..k],
+        &c[..k],
+        &d[..k],
+        &e[..k],
+        &f[..k],
+        &g[..k],
+        &h[..k],
+    );
+    for i in 0..k {
+        let (o, a, b, c, d) = (&mut ob[i], &a[i], &b[i], &c[i], &d[i]);
+        let (e, f, g, h) = (&e[i], &f[i], &g[i], &h[i]);
+        for j in 0..BLOCK {
+            let ab = op::<MAX>(a[j], b[j]);
+            let cd = op::<MAX>(c[j], d[j]);
+            let ef = op::<MAX>(e[j], f[j]);
+            let gh = op::<MAX>(g[j], h[j]);
+            o[j] = op::<MAX>(op::<MAX>(ab, cd), op::<MAX>(ef, gh));
+        }
+    }
+    if ot.is_empty() {
+        return;
+    }
+    if n >= BLOCK {
+        // the tail as one more block ending at n (overlapping the last
+        // whole block; recomputing those outputs is harmless)
+        let at = |s: &[u8]| -> [u8; BLOCK] {
+            s.get(n - BLOCK..n)
+                .and_then(|b| b.try_into().ok())
+                .unwrap_or([identity::<MAX>(); BLOCK])
+        };
+        let mut acc = at(r[0]);
+        for s in &r[1..] {
+            let b = at(s);
+            for j in 0..BLOCK {
+                acc[j] = op::<MAX>(acc[j], b[j]);
+            }
+        }
+        let t = ot.len();
+        ot.copy_from_slice(&acc[BLOCK - t..]);
+        return;
+    }
+    for (j, o) in ot.iter_mut().enumerate() {
+        let i = m + j;
+        let mut acc = identity::<MAX>();
+        for s in r {
+            acc = op::<MAX>(acc, s.get(i).copied().unwrap_or(acc));
+        }
+        *o = acc;
+    }
+}
+
 /// `dst[x] = op(src[x−1], src[x], src[x+1])` with out-of-range neighbours ignored.
 fn line3<const MAX: bool>(src: &[u8], dst: &mut [u8]) {
     let n = src.len().min(dst.len());
@@ -157,11 +278,80 @@ fn line3<const MAX: bool>(src: &[u8], dst: &mut [u8]) {
         dst[0] = src[0];
         return;
     }
+    let (src, dst) = (&src[..n], &mut dst[..n]);
     dst[0] = op::<MAX>(src[0], src[1]);
-    for x in 1..n - 1 {
-        dst[x] = op::<MAX>(op::<MAX>(src[x - 1], src[x]), src[x + 1]);
+    // interior: three shifted views of the row, one fused pass
+    let (l, c, r) = (&src[..n - 2], &src[1..n - 1], &src[2..]);
+    for (((d, &a), &b), &e) in dst[1..n - 1].iter_mut().zip(l).zip(c).zip(r) {
+        *d = op::<MAX>(op::<MAX>(a, b), e);
     }
     dst[n - 1] = op::<MAX>(src[n - 2], src[n - 1]);
+}
+
+/// The streaming core of the disk operators: keeps, for each of the last
+/// 2r+1 source rows, its horizontal dilations (erosions) of half-width
+/// 1..=r (level 0 is the source row itself, read in place), and hands
+/// `emit(y, rows)` the 2r+1 (fewer at the borders) level rows whose
+/// combination is output row `y`. `ring` needs [`ring_len`] bytes.
+fn disk_stream<const MAX: bool>(
+    src: ImageView<'_>,
+    disk: &Disk,
+    ring: &mut [u8],
+    mut emit: impl FnMut(usize, &[&[u8]]),
+) -> Result<(), MorphError> {
+    let (w, h, r) = (src.width(), src.height(), disk.radius.min(MAX_SE / 2));
+    let rows = 2 * r + 1;
+    let slot = r * w;
+    if ring.len() < ring_len(w, r) {
+        return Err(MorphError::ScratchTooSmall);
+    }
+    let ring = &mut ring[..rows * slot];
+    let mut loaded = 0usize; // rows 0..loaded have their levels in the ring
+    for y in 0..h {
+        let need = (y + r + 1).min(h);
+        while loaded < need {
+            if slot > 0 {
+                let s = (loaded % rows) * slot;
+                let block = &mut ring[s..s + slot];
+                let mut prev: &[u8] = src.row(loaded);
+                let mut rest = block;
+                for _ in 0..r {
+                    let (next, tail) = rest.split_at_mut(w);
+                    line3::<MAX>(prev, next);
+                    prev = next;
+                    rest = tail;
+                }
+            }
+            loaded += 1;
+        }
+        let mut srcs: [&[u8]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+        let mut k = 0usize;
+        for dy in -(r as isize)..=(r as isize) {
+            let yy = y as isize + dy;
+            if yy < 0 || yy >= h as isize {
+                continue;
+            }
+            let yy = yy as usize;
+            let hw = disk.half_width(dy).min(r);
+            let row: &[u8] = if hw == 0 {
+                src.row(yy)
+            } else {
+                let s = (yy % rows) * slot + (hw - 1) * w;
+                &ring[s..s + w]
+            };
+            if let Some(slot) = srcs.get_mut(k) {
+                *slot = row;
+                k += 1;
+            }
+        }
+        emit(y, &srcs[..k]);
+    }
+    Ok(())
+}
+
+/// Ring bytes of [`disk_stream`]: `2r+1` rows × `r` levels.
+const fn ring_len(width: usize, radius: usize) -> usize {
+    (2 * radius + 1) * radius * width
 }
 
 /// Dilation (`MAX = true`) or erosion (`MAX = false`) of `src` by `disk`,
@@ -173,45 +363,16 @@ pub fn disk_rows<const MAX: bool>(
     scratch: &mut [u8],
     mut emit: impl FnMut(usize, &[u8]),
 ) -> Result<(), MorphError> {
-    let (w, h, r) = (src.width(), src.height(), disk.radius);
-    let ring = 2 * r + 1;
-    let slot = (r + 1) * w;
+    let (w, r) = (src.width(), disk.radius);
     if scratch.len() < disk_scratch_len(w, r) {
         return Err(MorphError::ScratchTooSmall);
     }
-    let (scratch, rest) = scratch.split_at_mut(ring * slot);
+    let (ring, rest) = scratch.split_at_mut(ring_len(w, r.min(MAX_SE / 2)));
     let out = &mut rest[..w];
-    let mut loaded = 0usize; // rows 0..loaded are in the ring
-    for y in 0..h {
-        let need = (y + r + 1).min(h);
-        while loaded < need {
-            let s = (loaded % ring) * slot;
-            let block = &mut scratch[s..s + slot];
-            let (first, rest) = block.split_at_mut(w);
-            first.copy_from_slice(src.row(loaded));
-            let mut prev: &mut [u8] = first;
-            let mut rest = rest;
-            for _ in 0..r {
-                let (next, tail) = rest.split_at_mut(w);
-                line3::<MAX>(prev, next);
-                prev = next;
-                rest = tail;
-            }
-            loaded += 1;
-        }
-        out.fill(identity::<MAX>());
-        for dy in -(r as isize)..=(r as isize) {
-            let yy = y as isize + dy;
-            if yy < 0 || yy >= h as isize {
-                continue;
-            }
-            let hw = disk.half_width(dy).min(r);
-            let s = (yy as usize % ring) * slot + hw * w;
-            combine::<MAX>(out, &scratch[s..s + w]);
-        }
+    disk_stream::<MAX>(src, disk, ring, |y, rows| {
+        reduce::<MAX>(out, rows);
         emit(y, out);
-    }
-    Ok(())
+    })
 }
 
 /// Dilation (`MAX = true`) or erosion (`MAX = false`) of `src` by `disk`
@@ -226,9 +387,12 @@ pub fn disk_op<const MAX: bool>(
     if dst.len() < w * src.height() {
         return Err(MorphError::DstTooSmall);
     }
-    disk_rows::<MAX>(src, disk, scratch, |y, row| {
+    if scratch.len() < disk_scratch_len(w, disk.radius) {
+        return Err(MorphError::ScratchTooSmall);
+    }
+    disk_stream::<MAX>(src, disk, scratch, |y, rows| {
         if let Some(d) = dst.get_mut(y * w..(y + 1) * w) {
-            d.copy_from_slice(row);
+            reduce::<MAX>(d, rows);
         }
     })
 }
@@ -279,28 +443,58 @@ pub fn line_row<const MAX: bool>(
         Some(o) => o,
         None => return,
     };
-    let half = (len / 2) as isize;
-    out.fill(identity::<MAX>());
-    for k in -half..=half {
+    let half = (len / 2).min(MAX_SE / 2);
+    let shift_of = |k: isize| match dir {
+        Diagonal::Main => k,
+        Diagonal::Anti => -k,
+    };
+    // interior columns [lo, hi): every shifted pixel is inside the row, so
+    // the output is one fused reduction of up to `len` shifted row slices
+    let lo = half.min(w);
+    let hi = w.saturating_sub(half).max(lo);
+    let mut srcs: [&[u8]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+    let mut n = 0usize;
+    let hs = half as isize;
+    for k in -hs..=hs {
         let yy = y as isize + k;
         if yy < 0 || yy >= h as isize {
             continue;
         }
         let row = src.row(yy as usize);
-        let shift = match dir {
-            Diagonal::Main => k,
-            Diagonal::Anti => -k,
-        };
-        // out[x] ⊕= row[x + shift] for x with 0 ≤ x + shift < w
-        let x0 = (-shift).max(0) as usize;
-        let x1 = (w as isize - shift).min(w as isize).max(0) as usize;
-        if x0 >= x1 {
+        let s0 = (lo as isize + shift_of(k)) as usize;
+        let s1 = (hi as isize + shift_of(k)) as usize;
+        if let (Some(s), Some(slot)) = (row.get(s0..s1), srcs.get_mut(n)) {
+            *slot = s;
+            n += 1;
+        }
+    }
+    reduce::<MAX>(&mut out[lo..hi], &srcs[..n]);
+    // border columns [0, lo) and [hi, w): out-of-image pixels ignored;
+    // per row offset, one short clipped combine per border
+    for (b0, b1) in [(0, lo), (hi, w)] {
+        if b0 >= b1 {
             continue;
         }
-        let s0 = (x0 as isize + shift) as usize;
-        let s1 = (x1 as isize + shift) as usize;
-        if let (Some(o), Some(s)) = (out.get_mut(x0..x1), row.get(s0..s1)) {
-            combine::<MAX>(o, s);
+        let ob = &mut out[b0..b1];
+        ob.fill(identity::<MAX>());
+        for k in -hs..=hs {
+            let yy = y as isize + k;
+            if yy < 0 || yy >= h as isize {
+                continue;
+            }
+            let row = src.row(yy as usize);
+            let shift = shift_of(k);
+            // x in [b0, b1) with 0 ≤ x + shift < w
+            let x0 = (b0 as isize).max(-shift);
+            let x1 = (b1 as isize).min(w as isize - shift);
+            if x0 >= x1 {
+                continue;
+            }
+            let (o0, o1) = ((x0 - b0 as isize) as usize, (x1 - b0 as isize) as usize);
+            let (s0, s1) = ((x0 + shift) as usize, (x1 + shift) as usize);
+            if let (Some(o), Some(sr)) = (ob.get_mut(o0..o1), row.get(s0..s1)) {
+                combine::<MAX>(o, sr);
+            }
         }
     }
 }
@@ -391,12 +585,23 @@ pub fn gradient_disk(
     dst: &mut [u8],
     scratch: &mut [u8],
 ) -> Result<(), MorphError> {
-    let w = src.width();
-    dilate_disk(src, disk, dst, scratch)?;
-    disk_rows::<false>(src, disk, scratch, |y, er| {
+    let (w, r) = (src.width(), disk.radius.min(MAX_SE / 2));
+    if dst.len() < w * src.height() {
+        return Err(MorphError::DstTooSmall);
+    }
+    if scratch.len() < disk_scratch_len(w, disk.radius) {
+        return Err(MorphError::ScratchTooSmall);
+    }
+    // dilation straight into `dst`, then each erosion row into `tmp` and
+    // subtracted from the dilation row
+    disk_op::<true>(src, disk, dst, scratch)?;
+    let (ring, rest) = scratch.split_at_mut(ring_len(w, r));
+    let tmp = &mut rest[..w];
+    disk_stream::<false>(src, disk, ring, |y, rows| {
         if let Some(d) = dst.get_mut(y * w..(y + 1) * w) {
-            for (d, &e) in d.iter_mut().zip(er) {
-                *d = d.saturating_sub(e);
+            reduce::<false>(tmp, rows);
+            for (a, &b) in d.iter_mut().zip(tmp.iter()) {
+                *a = a.saturating_sub(b);
             }
         }
     })
@@ -536,7 +741,7 @@ mod tests {
         // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
         #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         #[test]
-        fn disk_ops_equal_naive(w in 1usize..24, h in 1usize..24, size in prop::sample::select(vec![1u8, 3, 5, 7, 9]), seed in any::<u64>()) {
+        fn disk_ops_equal_naive(w in 1usize..70, h in 1usize..24, size in prop::sample::select(vec![1u8, 3, 5, 7, 9]), seed in any::<u64>()) {
             let mut s = seed;
             let img: Vec<u8> = (0..w * h).map(|_| { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 }).collect();
             let d = Disk::opencv_ellipse(size);
@@ -547,12 +752,38 @@ mod tests {
             prop_assert_eq!(&out, &naive::<true>(&img, w, h, &|dx, dy| d.contains(dx, dy), d.radius as isize));
             erode_disk(v, &d, &mut out, &mut scratch).unwrap();
             prop_assert_eq!(&out, &naive::<false>(&img, w, h, &|dx, dy| d.contains(dx, dy), d.radius as isize));
+            // the fused gradient equals naive dilation minus naive erosion,
+            // with the exact scratch size and with a roomier one
+            let grad_want: Vec<u8> = naive::<true>(&img, w, h, &|dx, dy| d.contains(dx, dy), d.radius as isize)
+                .iter()
+                .zip(naive::<false>(&img, w, h, &|dx, dy| d.contains(dx, dy), d.radius as isize))
+                .map(|(a, b)| a - b)
+                .collect();
+            gradient_disk(v, &d, &mut out, &mut scratch).unwrap();
+            prop_assert_eq!(&out, &grad_want);
+            let mut big = vec![0u8; 3 * disk_scratch_len(w, d.radius)];
+            gradient_disk(v, &d, &mut out, &mut big).unwrap();
+            prop_assert_eq!(&out, &grad_want);
+            let len = 2 * d.radius + 1;
+            let hl = d.radius as isize;
             for dir in [Diagonal::Main, Diagonal::Anti] {
                 let se = |dx: isize, dy: isize| match dir { Diagonal::Main => dx == dy, Diagonal::Anti => dx == -dy };
-                line_op::<true>(v, 7, dir, &mut out).unwrap();
-                prop_assert_eq!(&out, &naive::<true>(&img, w, h, &se, 3));
-                line_op::<false>(v, 7, dir, &mut out).unwrap();
-                prop_assert_eq!(&out, &naive::<false>(&img, w, h, &se, 3));
+                line_op::<true>(v, len, dir, &mut out).unwrap();
+                prop_assert_eq!(&out, &naive::<true>(&img, w, h, &se, hl));
+                line_op::<false>(v, len, dir, &mut out).unwrap();
+                prop_assert_eq!(&out, &naive::<false>(&img, w, h, &se, hl));
+            }
+            // mesh removal equals the naive composition of the four line operators
+            if len >= 3 {
+                let main = |dx: isize, dy: isize| dx == dy;
+                let anti = |dx: isize, dy: isize| dx == -dy;
+                let e1 = naive::<false>(&img, w, h, &main, hl);
+                let o1 = naive::<true>(&e1, w, h, &main, hl);
+                let e2 = naive::<false>(&o1, w, h, &anti, hl);
+                let want = naive::<true>(&e2, w, h, &anti, hl);
+                let mut tmp = vec![0u8; w * h];
+                remove_mesh(v, len, &mut tmp, &mut out).unwrap();
+                prop_assert_eq!(&out, &want);
             }
             // too-small buffers are errors, not panics
             prop_assert!(dilate_disk(v, &d, &mut out[..w * h - 1], &mut scratch).is_err());
