@@ -562,6 +562,9 @@ pub struct FixedMap {
 }
 
 impl FixedMap {
+    /// Output rows per parallel band of [`FixedMap::apply`].
+    pub const BAND_ROWS: usize = 64;
+
     /// Quantizes float maps.
     pub fn from_float(map: &RectifyMap) -> Self {
         let n = map.map_x.len();
@@ -603,10 +606,28 @@ impl FixedMap {
     pub fn apply(&self, src: &GrayImage) -> Result<GrayImage, RemapError> {
         let view = ImageView::packed(src.as_raw(), src.width() as usize, src.height() as usize)
             .map_err(RemapError::Image)?;
+        use rayon::prelude::*;
         let mut out = GrayImage::new(self.width, self.height);
         let (w, h) = (self.width as usize, self.height as usize);
-        let mut dst = ImageViewMut::packed(&mut out, w, h).map_err(RemapError::Image)?;
-        remap::remap_bilinear(&view, &self.table()?, &mut dst)?;
+        self.table()?; // size check
+        // row bands remapped in parallel: each band is the table's rows
+        // and the output's rows of that band (the source is shared)
+        let band = Self::BAND_ROWS;
+        let buf: &mut [u8] = &mut out;
+        buf.par_chunks_mut((band * w).max(1))
+            .enumerate()
+            .try_for_each(|(i, chunk)| {
+                let (y0, rows) = (i * band, chunk.len() / w.max(1));
+                let t = RemapTable::new(
+                    w,
+                    rows,
+                    self.xy.get(2 * y0 * w..).unwrap_or(&[]),
+                    self.frac.get(y0 * w..).unwrap_or(&[]),
+                )?;
+                let mut dst = ImageViewMut::packed(chunk, w, rows).map_err(RemapError::Image)?;
+                remap::remap_bilinear(&view, &t, &mut dst)
+            })?;
+        debug_assert_eq!(h * w, buf.len());
         Ok(out)
     }
 }
@@ -656,7 +677,8 @@ impl Rectifier {
         if left.dimensions() != size || right.dimensions() != size {
             return Err(RemapError::SizeMismatch);
         }
-        Ok((self.left_map.apply(left)?, self.right_map.apply(right)?))
+        let (l, r) = rayon::join(|| self.left_map.apply(left), || self.right_map.apply(right));
+        Ok((l?, r?))
     }
 }
 
