@@ -292,7 +292,12 @@ pub fn bench(dir: &Path, opts: &BenchOptions) -> Result<BenchReport> {
     }
     let stage_ms = STAGES
         .iter()
-        .map(|&k| (k, median(samples.get_mut(k).map(|v| &mut v[..]).unwrap_or(&mut []))))
+        .map(|&k| {
+            (
+                k,
+                median(samples.get_mut(k).map(|v| &mut v[..]).unwrap_or(&mut [])),
+            )
+        })
         .collect();
     Ok(BenchReport {
         haul: dir.display().to_string(),
@@ -338,7 +343,10 @@ impl BenchReport {
         );
         s += &format!("{:<22}{:>12}\n", "stage", "ms/pair");
         for k in STAGES {
-            s += &format!("{k:<22}{:>12.2}\n", self.stage_ms.get(k).copied().unwrap_or(0.0));
+            s += &format!(
+                "{k:<22}{:>12.2}\n",
+                self.stage_ms.get(k).copied().unwrap_or(0.0)
+            );
         }
         s += &format!(
             "\ncore pairs/s (1 thread, frames in memory)  {:>10.1}\n",

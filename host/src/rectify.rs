@@ -610,8 +610,8 @@ impl FixedMap {
         let mut out = GrayImage::new(self.width, self.height);
         let (w, h) = (self.width as usize, self.height as usize);
         self.table()?; // size check
-        // row bands remapped in parallel: each band is the table's rows
-        // and the output's rows of that band (the source is shared)
+                       // row bands remapped in parallel: each band is the table's rows
+                       // and the output's rows of that band (the source is shared)
         let band = Self::BAND_ROWS;
         let buf: &mut [u8] = &mut out;
         buf.par_chunks_mut((band * w).max(1))
