@@ -497,16 +497,22 @@ impl RectifiedCamera {
 
     /// The float maps of `cv2.initUndistortRectifyMap(M, D, R, P, size, CV_32FC1)`.
     pub fn float_map(&self) -> RectifyMap {
+        use rayon::prelude::*;
         let (w, h) = (self.width as usize, self.height as usize);
-        let mut map_x = Vec::with_capacity(w * h);
-        let mut map_y = Vec::with_capacity(w * h);
-        for y in 0..h {
-            for x in 0..w {
-                let (u, v) = self.rect_to_raw(x as f64, y as f64);
-                map_x.push(u as f32);
-                map_y.push(v as f32);
-            }
-        }
+        let mut map_x = vec![0f32; w * h];
+        let mut map_y = vec![0f32; w * h];
+        // rows in parallel (the same per-pixel arithmetic, so the same maps)
+        map_x
+            .par_chunks_mut(w.max(1))
+            .zip(map_y.par_chunks_mut(w.max(1)))
+            .enumerate()
+            .for_each(|(y, (mx, my))| {
+                for (x, (px, py)) in mx.iter_mut().zip(my.iter_mut()).enumerate() {
+                    let (u, v) = self.rect_to_raw(x as f64, y as f64);
+                    *px = u as f32;
+                    *py = v as f32;
+                }
+            });
         RectifyMap {
             width: self.width,
             height: self.height,
@@ -655,8 +661,10 @@ impl Rectifier {
     pub fn new(calib: &StereoCalib) -> Self {
         let rect = stereo_rectify(calib);
         let (left, right) = RectifiedCamera::pair(calib, &rect);
-        let left_map = FixedMap::from_float(&left.float_map());
-        let right_map = FixedMap::from_float(&right.float_map());
+        let (left_map, right_map) = rayon::join(
+            || FixedMap::from_float(&left.float_map()),
+            || FixedMap::from_float(&right.float_map()),
+        );
         Rectifier {
             calib: calib.clone(),
             rect,
