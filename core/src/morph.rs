@@ -453,6 +453,7 @@ pub fn line_row<const MAX: bool>(
     let lo = half.min(w);
     let hi = w.saturating_sub(half).max(lo);
     let mut srcs: [&[u8]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+    let mut rows: [(&[u8], isize); MAX_INPUTS] = [(&[], 0); MAX_INPUTS];
     let mut n = 0usize;
     let hs = half as isize;
     for k in -hs..=hs {
@@ -461,41 +462,39 @@ pub fn line_row<const MAX: bool>(
             continue;
         }
         let row = src.row(yy as usize);
-        let s0 = (lo as isize + shift_of(k)) as usize;
-        let s1 = (hi as isize + shift_of(k)) as usize;
-        if let (Some(s), Some(slot)) = (row.get(s0..s1), srcs.get_mut(n)) {
-            *slot = s;
+        let sh = shift_of(k);
+        let s0 = (lo as isize + sh) as usize;
+        let s1 = (hi as isize + sh) as usize;
+        if let (Some(slot), Some(r)) = (srcs.get_mut(n), rows.get_mut(n)) {
+            // an empty interior (w ≤ len − 1) reads no slice
+            *slot = row.get(s0..s1).unwrap_or(&[]);
+            *r = (row, sh);
             n += 1;
         }
     }
-    reduce::<MAX>(&mut out[lo..hi], &srcs[..n]);
-    // border columns [0, lo) and [hi, w): out-of-image pixels ignored;
-    // per row offset, one short clipped combine per border
-    for (b0, b1) in [(0, lo), (hi, w)] {
-        if b0 >= b1 {
-            continue;
-        }
-        let ob = &mut out[b0..b1];
-        ob.fill(identity::<MAX>());
-        for k in -hs..=hs {
-            let yy = y as isize + k;
-            if yy < 0 || yy >= h as isize {
-                continue;
-            }
-            let row = src.row(yy as usize);
-            let shift = shift_of(k);
-            // x in [b0, b1) with 0 ≤ x + shift < w
-            let x0 = (b0 as isize).max(-shift);
-            let x1 = (b1 as isize).min(w as isize - shift);
-            if x0 >= x1 {
-                continue;
-            }
-            let (o0, o1) = ((x0 - b0 as isize) as usize, (x1 - b0 as isize) as usize);
-            let (s0, s1) = ((x0 + shift) as usize, (x1 + shift) as usize);
-            if let (Some(o), Some(sr)) = (ob.get_mut(o0..o1), row.get(s0..s1)) {
-                combine::<MAX>(o, sr);
+    if hi > lo {
+        reduce::<MAX>(&mut out[lo..hi], &srcs[..n]);
+    }
+    // border columns [0, lo) and [hi, w): at most `half` each, pixel by
+    // pixel over the same rows, out-of-image columns ignored
+    let rows = &rows[..n];
+    let border = |x: usize| -> u8 {
+        let mut acc = identity::<MAX>();
+        for &(row, sh) in rows {
+            let xx = x as isize + sh;
+            if xx >= 0 {
+                if let Some(&v) = row.get(xx as usize) {
+                    acc = op::<MAX>(acc, v);
+                }
             }
         }
+        acc
+    };
+    for (x, o) in out[..lo].iter_mut().enumerate() {
+        *o = border(x);
+    }
+    for (x, o) in out[hi..].iter_mut().enumerate() {
+        *o = border(hi + x);
     }
 }
 
