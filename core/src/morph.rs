@@ -684,7 +684,8 @@ pub fn median3_binary(src: ImageView<'_>, dst: &mut [u8]) -> Result<(), MorphErr
             let n = x1 - x0;
             pad[0] = count(x0.saturating_sub(1));
             pad[n + 1] = count(if x1 < w { x1 } else { w - 1 });
-            if let (Some(a), Some(b), Some(c)) = (up.get(x0..x1), mid.get(x0..x1), down.get(x0..x1)) {
+            if let (Some(a), Some(b), Some(c)) = (up.get(x0..x1), mid.get(x0..x1), down.get(x0..x1))
+            {
                 for (((p, &a), &b), &c) in pad[1..=n].iter_mut().zip(a).zip(b).zip(c) {
                     *p = (a != 0) as u8 + (b != 0) as u8 + (c != 0) as u8;
                 }
