@@ -25,10 +25,32 @@ pub const fn bins_log2(bins: usize) -> u32 {
 }
 
 /// Adds every pixel of `row` to a 256-bin histogram.
+///
+/// Pixels alternate between `hist` and a second, local histogram folded
+/// in at the end: a run of equal grey levels (flat water) then increments
+/// two counters in turn instead of one, so consecutive increments do not
+/// wait on each other's store (about twice as fast on such rows; one extra
+/// add per bin per call).
 #[inline]
 pub fn add_row_256(hist: &mut [u32; 256], row: &[u8]) {
-    for &v in row {
+    if row.len() < 512 {
+        for &v in row {
+            hist[v as usize] = hist[v as usize].wrapping_add(1);
+        }
+        return;
+    }
+    let mut other = [0u32; 256];
+    let pairs = row.chunks_exact(2);
+    let rest = pairs.remainder();
+    for p in pairs {
+        hist[p[0] as usize] = hist[p[0] as usize].wrapping_add(1);
+        other[p[1] as usize] = other[p[1] as usize].wrapping_add(1);
+    }
+    for &v in rest {
         hist[v as usize] = hist[v as usize].wrapping_add(1);
+    }
+    for (h, o) in hist.iter_mut().zip(other) {
+        *h = h.wrapping_add(o);
     }
 }
 
@@ -210,5 +232,21 @@ mod tests {
         assert_eq!(percentile_256(&h, 99), 98);
         assert_eq!(percentile_256(&h, 50), 49);
         assert_eq!(percentile_256(&[0; 256], 99), 255);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 128 }))]
+        /// The two-counter histogram equals a naive count, for rows shorter
+        /// and longer than the split threshold, odd and even lengths.
+        #[test]
+        fn add_row_256_equals_naive(len in 0usize..1500, seed in proptest::prelude::any::<u64>(), levels in 1u64..256) {
+            let mut s = seed | 1;
+            let row: std::vec::Vec<u8> = (0..len).map(|_| { s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s % levels) as u8 }).collect();
+            let mut want = [3u32; 256];
+            for &v in &row { want[v as usize] += 1; }
+            let mut got = [3u32; 256];
+            add_row_256(&mut got, &row);
+            proptest::prop_assert_eq!(got, want);
+        }
     }
 }

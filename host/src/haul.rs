@@ -165,8 +165,10 @@ impl Haul {
             location: e.location,
             message: format!("frame {}: {}", pair.index, e.message),
         };
-        let (l, l16) = decode_gray(&pair.left).map_err(frame)?;
-        let (r, r16) = decode_gray(&pair.right).map_err(frame)?;
+        // both files decoded side by side (rayon pool); left's error first
+        let (l, r) = rayon::join(|| decode_gray(&pair.left), || decode_gray(&pair.right));
+        let (l, l16) = l.map_err(frame)?;
+        let (r, r16) = r.map_err(frame)?;
         if l16 || r16 {
             let path = if l16 { &pair.left } else { &pair.right };
             if !self.warned_16bit.swap(true, AtomicOrdering::Relaxed) {

@@ -6,12 +6,14 @@
 //! live in `fishtrack-core`; this crate feeds them and checks them.
 #![deny(missing_docs)]
 
+pub mod bench_cmd;
 pub mod calib;
 pub mod compare_cmd;
 pub mod demo_cmd;
 pub mod detect;
 pub mod error;
 pub mod eval;
+pub mod frame_source;
 pub mod haul;
 pub mod output;
 pub mod overlay;

@@ -89,6 +89,12 @@ enum Command {
         /// Print JSON.
         #[arg(long)]
         json: bool,
+        /// Repeated runs (medians are reported).
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// Only the first N frame pairs.
+        #[arg(long)]
+        frames: Option<usize>,
     },
     /// Strobe/camera timing bench check over a serial line.
     TimingCheck {
@@ -99,13 +105,6 @@ enum Command {
         #[arg(long, default_value_t = 25)]
         frames: u32,
     },
-}
-
-fn not_built(name: &str) -> anyhow::Result<()> {
-    Err(anyhow::Error::new(fishtrack::InputError::plain(
-        format!("fishtrack {name}"),
-        "this subcommand is not built yet",
-    )))
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -161,7 +160,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Command::Compare { haul } => fishtrack::compare_cmd::run(&haul),
-        Command::Bench { .. } => not_built("bench"),
+        Command::Bench {
+            haul,
+            json,
+            repeats,
+            frames,
+        } => fishtrack::bench_cmd::run(
+            &haul,
+            json,
+            &fishtrack::bench_cmd::BenchOptions { repeats, frames },
+        ),
         Command::TimingCheck { port, frames } => fishtrack::timing::run(&port, frames),
     }
 }

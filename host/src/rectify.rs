@@ -497,16 +497,22 @@ impl RectifiedCamera {
 
     /// The float maps of `cv2.initUndistortRectifyMap(M, D, R, P, size, CV_32FC1)`.
     pub fn float_map(&self) -> RectifyMap {
+        use rayon::prelude::*;
         let (w, h) = (self.width as usize, self.height as usize);
-        let mut map_x = Vec::with_capacity(w * h);
-        let mut map_y = Vec::with_capacity(w * h);
-        for y in 0..h {
-            for x in 0..w {
-                let (u, v) = self.rect_to_raw(x as f64, y as f64);
-                map_x.push(u as f32);
-                map_y.push(v as f32);
-            }
-        }
+        let mut map_x = vec![0f32; w * h];
+        let mut map_y = vec![0f32; w * h];
+        // rows in parallel (the same per-pixel arithmetic, so the same maps)
+        map_x
+            .par_chunks_mut(w.max(1))
+            .zip(map_y.par_chunks_mut(w.max(1)))
+            .enumerate()
+            .for_each(|(y, (mx, my))| {
+                for (x, (px, py)) in mx.iter_mut().zip(my.iter_mut()).enumerate() {
+                    let (u, v) = self.rect_to_raw(x as f64, y as f64);
+                    *px = u as f32;
+                    *py = v as f32;
+                }
+            });
         RectifyMap {
             width: self.width,
             height: self.height,
@@ -562,6 +568,9 @@ pub struct FixedMap {
 }
 
 impl FixedMap {
+    /// Output rows per parallel band of [`FixedMap::apply`].
+    pub const BAND_ROWS: usize = 64;
+
     /// Quantizes float maps.
     pub fn from_float(map: &RectifyMap) -> Self {
         let n = map.map_x.len();
@@ -603,10 +612,28 @@ impl FixedMap {
     pub fn apply(&self, src: &GrayImage) -> Result<GrayImage, RemapError> {
         let view = ImageView::packed(src.as_raw(), src.width() as usize, src.height() as usize)
             .map_err(RemapError::Image)?;
+        use rayon::prelude::*;
         let mut out = GrayImage::new(self.width, self.height);
         let (w, h) = (self.width as usize, self.height as usize);
-        let mut dst = ImageViewMut::packed(&mut out, w, h).map_err(RemapError::Image)?;
-        remap::remap_bilinear(&view, &self.table()?, &mut dst)?;
+        self.table()?; // size check
+                       // row bands remapped in parallel: each band is the table's rows
+                       // and the output's rows of that band (the source is shared)
+        let band = Self::BAND_ROWS;
+        let buf: &mut [u8] = &mut out;
+        buf.par_chunks_mut((band * w).max(1))
+            .enumerate()
+            .try_for_each(|(i, chunk)| {
+                let (y0, rows) = (i * band, chunk.len() / w.max(1));
+                let t = RemapTable::new(
+                    w,
+                    rows,
+                    self.xy.get(2 * y0 * w..).unwrap_or(&[]),
+                    self.frac.get(y0 * w..).unwrap_or(&[]),
+                )?;
+                let mut dst = ImageViewMut::packed(chunk, w, rows).map_err(RemapError::Image)?;
+                remap::remap_bilinear(&view, &t, &mut dst)
+            })?;
+        debug_assert_eq!(h * w, buf.len());
         Ok(out)
     }
 }
@@ -634,8 +661,10 @@ impl Rectifier {
     pub fn new(calib: &StereoCalib) -> Self {
         let rect = stereo_rectify(calib);
         let (left, right) = RectifiedCamera::pair(calib, &rect);
-        let left_map = FixedMap::from_float(&left.float_map());
-        let right_map = FixedMap::from_float(&right.float_map());
+        let (left_map, right_map) = rayon::join(
+            || FixedMap::from_float(&left.float_map()),
+            || FixedMap::from_float(&right.float_map()),
+        );
         Rectifier {
             calib: calib.clone(),
             rect,
@@ -656,7 +685,8 @@ impl Rectifier {
         if left.dimensions() != size || right.dimensions() != size {
             return Err(RemapError::SizeMismatch);
         }
-        Ok((self.left_map.apply(left)?, self.right_map.apply(right)?))
+        let (l, r) = rayon::join(|| self.left_map.apply(left), || self.right_map.apply(right));
+        Ok((l?, r?))
     }
 }
 

@@ -250,21 +250,12 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     let mut events: Vec<PipelineEvent> = Vec::new();
     let mut secs = [0.0f64; STAGES.len()];
     let started = Instant::now();
-    for pair in &setup.haul.frames {
-        let t0 = Instant::now();
-        let (l, r) = setup
-            .haul
-            .load_pair(pair, Some((setup.width, setup.height)))?;
-        secs[0] += t0.elapsed().as_secs_f64();
-        let t1 = Instant::now();
-        let (lr, rr) = setup.rectifier.rectify_pair(&l, &r).map_err(|e| {
-            InputError::file(
-                &pair.left,
-                format!("frame {}: cannot rectify: {e:?}", pair.index),
-            )
-        })?;
-        secs[1] += t1.elapsed().as_secs_f64();
-        let (lv, rv) = views(&lr, &rr)?;
+    // read + rectify run ahead on another thread (crate::frame_source)
+    crate::frame_source::for_each_rectified(&setup, &setup.haul.frames, |rp| {
+        let pair = rp.pair;
+        secs[0] += rp.read_s;
+        secs[1] += rp.rectify_s;
+        let (lv, rv) = views(&rp.left, &rp.right)?;
         let mut last = Instant::now();
         pipe.process_frame(pair.index, lv, rv, &mut ws, &mut |e| {
             if let PipelineEvent::StageDone { stage, .. } = e {
@@ -288,7 +279,8 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
             InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
         })?;
         bar.inc(1);
-    }
+        Ok(())
+    })?;
     bar.finish_and_clear();
     let t = Instant::now();
     pipe.finish(&mut |e| events.push(*e));

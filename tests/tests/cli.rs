@@ -144,3 +144,86 @@ fn unbuilt_subcommands_say_so() {
         }
     }
 }
+
+/// `fishtrack bench --json` on a small synthetic haul: every documented
+/// key is present, the figures are consistent with each other and with the
+/// haul, and the pipeline state fits its 512 KiB limit.
+#[test]
+fn bench_json_reports_every_key() {
+    let t = tempfile::tempdir().unwrap();
+    let haul = t.path().join("haul");
+    let h = haul.to_str().unwrap();
+    let out = run(&["synth", h, "--frames", "3", "--size", "192", "--seed", "3"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let out = run(&["bench", h, "--json", "--repeats", "2"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("bench --json is not JSON ({e}): {}", text(&out.stdout)));
+    assert_eq!(v["width"], 192);
+    assert_eq!(v["height"], 192);
+    assert_eq!(v["pairs"], 3);
+    assert_eq!(v["repeats"], 2);
+    let num = |k: &str| {
+        v[k].as_f64()
+            .unwrap_or_else(|| panic!("{k} missing or not a number: {v}"))
+    };
+    assert!(num("core_pairs_per_s") > 0.0);
+    assert!(num("end_to_end_pairs_per_s") > 0.0);
+    let state = num("pipeline_state_bytes");
+    assert!(
+        state > 100_000.0 && state <= num("pipeline_state_limit_bytes"),
+        "{v}"
+    );
+    assert_eq!(num("pipeline_state_limit_bytes"), 524_288.0);
+    // the workspace holds at least the two frame buffers of a 192² frame
+    assert!(num("workspace_bytes") >= 2.0 * 192.0 * 192.0, "{v}");
+    // peak RSS covers at least the workspace it allocated
+    assert!(num("peak_rss_bytes") >= num("workspace_bytes"), "{v}");
+    let stages = v["stage_ms_per_pair"]
+        .as_object()
+        .unwrap_or_else(|| panic!("stage_ms_per_pair missing: {v}"));
+    for k in [
+        "read",
+        "rectify",
+        "mesh_removal",
+        "coarse",
+        "local_segmentation",
+        "segmentation",
+        "stereo",
+        "length",
+        "tracking",
+        "core_total",
+    ] {
+        let ms = stages
+            .get(k)
+            .and_then(|x| x.as_f64())
+            .unwrap_or_else(|| panic!("stage {k} missing: {v}"));
+        assert!(ms.is_finite() && ms >= 0.0, "{k}: {ms}");
+    }
+    // the stages of the pipeline are parts of its whole (medians of the
+    // same pairs, so allow for the median of a sum not being a sum)
+    let part = |k: &str| stages[k].as_f64().unwrap_or(0.0);
+    assert!(
+        part("segmentation") <= 1.5 * part("core_total") + 0.5,
+        "{v}"
+    );
+    assert!(part("core_total") > 0.0 && part("rectify") > 0.0 && part("read") > 0.0);
+    // pairs/s and the per-pair core time describe the same runs
+    let core_ms = 1e3 / num("core_pairs_per_s");
+    assert!(
+        core_ms < 100.0 * (part("core_total") + 1.0),
+        "{core_ms} vs {v}"
+    );
+
+    // a bad haul: exit 2, naming it
+    let missing = t.path().join("no-such-haul");
+    let out = run(&["bench", missing.to_str().unwrap(), "--json"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("no-such-haul"));
+    // a haul without frames: exit 2
+    let empty = t.path().join("empty");
+    std::fs::create_dir_all(empty.join("left")).unwrap();
+    std::fs::create_dir_all(empty.join("right")).unwrap();
+    let out = run(&["bench", empty.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+}

@@ -179,7 +179,7 @@ pub(crate) fn coarse_regions(
         }
     };
     for row in ws.grad.chunks_exact(w).take(h) {
-        labeler.push_row(w, |x| row.get(x).is_some_and(|&g| g > t), &mut on_done);
+        labeler.push_row_above(row, t, &mut on_done);
     }
     labeler.finish(&mut on_done);
     Ok(count)
