@@ -109,11 +109,22 @@ impl core::fmt::Display for SegmentError {
 impl core::error::Error for SegmentError {}
 
 /// Per-step counters of one [`segment_frame`] call.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SegmentStats {
-    /// Global threshold applied to the morphological gradient.
-    pub gradient_threshold: u8,
+    /// Global threshold applied to the morphological gradient (the high,
+    /// seed threshold of the hysteresis at reduced resolution). Grey
+    /// levels at `coarse_scale` 1, sixteenths of a grey level otherwise.
+    pub gradient_threshold: u16,
+    /// The low (growing) threshold of the hysteresis; equals
+    /// `gradient_threshold` at `coarse_scale` 1.
+    pub gradient_threshold_low: u16,
+    /// The frame's robust white-noise σ, sixteenths of a grey level
+    /// ([`crate::noise::noise_sigma16`] on the rectified input frame).
+    pub noise_sigma16: u32,
+    /// The variance limit eq. (6) applied (θ_V, or θ_V scaled to the
+    /// measured noise; see [`local`]).
+    pub var_limit: f32,
     /// Connected components of the thresholded gradient.
     pub coarse_components: u32,
     /// Of those, skipped as smaller than `area_min / 4`.
@@ -133,6 +144,9 @@ pub struct SegmentStats {
     pub rejected_area: u32,
     /// Components rejected by variance, eq. (5)–(6).
     pub rejected_variance: u32,
+    /// Final objects rejected by the elongation test
+    /// ([`local::elongated_enough`]).
+    pub rejected_shape: u32,
     /// Components past [`MAX_ROI_COMPONENTS`] in one region (not examined).
     pub label_overflow: u32,
     /// Objects of the same fish found in overlapping regions (removed).
@@ -219,6 +233,8 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
     let n_regions = coarse::coarse_regions(img, params, &mut ws, &mut stats)?;
     let n = w * h;
     let frame = ImageView::packed(&ws.filtered[..n], w, h).map_err(SegmentError::Image)?;
+    stats.noise_sigma16 = crate::noise::noise_sigma16(img);
+    stats.var_limit = local::variance_limit(params, stats.noise_sigma16);
     for rw in ws.regions.iter().take(n_regions) {
         let region = coarse::decode_region(rw);
         stats.regions += 1;
