@@ -76,7 +76,7 @@ pub struct Params {
     pub variance_literal: bool,
     /// Smallest elongation `√(λ₁/λ₂)` of an output object (beyond the
     /// paper; `crate::segment::local::elongated_enough`); 1 turns the test
-    /// off. Default 1.5.
+    /// off. Default 2.
     pub min_elongation: f32,
 
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
@@ -120,7 +120,7 @@ impl Default for Params {
             variance_rejection: true,
             coarse_scale: 4,
             variance_literal: false,
-            min_elongation: 1.5,
+            min_elongation: 2.0,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,

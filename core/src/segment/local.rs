@@ -19,10 +19,14 @@
 //!   Ablations: `double_threshold = false` → B = median(M_τ);
 //!   `backprojection = false` → B = median(M_high).
 //! - Components of B (8-connected): eq. (4) keeps `area_min ≤ A ≤ area_max`,
-//!   eq. (5)–(6) keeps unbiased variance `σ² ≥ var_min`.
+//!   eq. (5)–(6) keeps unbiased variance `σ² ≥` [`variance_limit`]: θ_V
+//!   (`var_min`) with `variance_literal`, by default θ_V scaled down to the
+//!   frame's measured noise on quiet frames (beyond the paper).
 //! - Closing then opening with the `disk_size` disk (Section III.D), OpenCV
 //!   border convention, then components again; eq. (4) is applied once
-//!   more so that fragments split off by the opening are not output.
+//!   more so that fragments split off by the opening are not output, and
+//!   (beyond the paper) objects less elongated than `min_elongation` are
+//!   dropped ([`elongated_enough`]).
 //!
 //! Memory bound: the ROI buffers of the workspace (8 bytes per ROI pixel),
 //! one span per ROI row, [`super::MAX_ROI_COMPONENTS`] statistics records;

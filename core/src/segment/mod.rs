@@ -2,11 +2,20 @@
 //! Section V.A) on one rectified 8-bit frame.
 //!
 //! Stages, data flowing one way:
-//! 1. [`coarse`]: trawl-mesh removal, 7 × 7 morphological gradient, global
-//!    threshold, connected components → elliptic local regions (III.A).
+//! 1. [`coarse`]: trawl-mesh removal, morphological gradient (by default
+//!    on the frame box-averaged 4 × 4, with a hysteresis threshold — beyond
+//!    the paper; `coarse_scale = 1` is the paper's 7 × 7 gradient at full
+//!    resolution with one global threshold), connected components →
+//!    elliptic local regions (III.A).
 //! 2. [`local`], per region: double local thresholding (eq. (1)), 3 × 3
 //!    median, histogram backprojection (eq. (2)–(3)), area and variance
-//!    rejection (eq. (4)–(6)), closing then opening (III.D).
+//!    rejection (eq. (4)–(6); by default the variance limit follows the
+//!    frame's measured noise, [`local::variance_limit`]), closing then
+//!    opening (III.D), and (beyond the paper) an elongation test on the
+//!    final objects ([`local::elongated_enough`]).
+//!
+//! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
+//! .. }` is the paper's Section III exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
 //!
@@ -33,7 +42,9 @@
 //!
 //! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
 //! `workspace_size(2048, 2048, 1 << 20)` = 18 098 496 bytes (17.3 MiB):
-//! 8 MiB for the two frame buffers, 1 MiB for the morphology ring (sized
+//! 8 MiB for the two frame buffers (the second one, the full-resolution
+//! gradient, also holds the 4 × 4-downsampled frame, its gradient, labels
+//! and masks: 2.5 MiB, so the reduced-resolution pass costs no memory), 1 MiB for the morphology ring (sized
 //! for disks up to 31 × 31), about 0.3 MiB of labelling tables and region
 //! records, and 8 MiB of ROI buffers (measured by the
 //! `full_size_frame_with_recommended_capacities` test). Recommended output
@@ -48,7 +59,7 @@ pub mod local;
 mod workspace;
 
 pub use workspace::{
-    fixed_size, workspace_size, BYTES_PER_ROI_PIXEL, MAX_REGIONS, MAX_ROI_COMPONENTS,
+    fixed_size, lowres_size, workspace_size, BYTES_PER_ROI_PIXEL, MAX_REGIONS, MAX_ROI_COMPONENTS,
 };
 
 use crate::error::{ImageError, ParamError};
