@@ -343,5 +343,17 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(p.validate().unwrap_err().key(), "disk_size");
+        for bad in [0u8, 2, 3, 17] {
+            let p = Params {
+                coarse_scale: bad,
+                ..Params::default()
+            };
+            assert_eq!(p.validate().unwrap_err().key(), "coarse_scale");
+        }
+        let p = Params {
+            min_elongation: f32::NAN,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "min_elongation");
     }
 }
