@@ -228,7 +228,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(64))]
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 2 } else { 64 }))]
         #[test]
         fn mean16_equals_naive(w in 1usize..70, h in 1usize..20, f in 1usize..9,
                                seed in any::<u64>()) {
