@@ -17,6 +17,11 @@ from DIR and writes OpenCV's results next to them:
             -> backproject_<bins>.pgm for bins in 8, 16, 32:
                  H = cv2.calcHist(.., mask, [bins], [0, 256]); ratio eq. (2);
                  cv2.calcBackProject of the 0/1 histogram (H_R > 0.3), scale 255
+  grey.pgm  -> lowres_<f>.bin (uint16, row-major) for f in 4, 8 when f
+                 divides both sides: round(16 * cv2.resize(grey as float64,
+                 (w/f, h/f), INTER_AREA)), halves up
+            -> lowgrad_<f>.bin: cv2.morphologyEx of that uint16 image,
+                 MORPH_GRADIENT, MORPH_ELLIPSE (5, 5)
 Border conventions are OpenCV's defaults (morphology: pixels outside the
 image ignored; medianBlur: replicated border).
 """
@@ -81,6 +86,16 @@ def main():
         keep = (ratio > np.float32(0.3)).astype(np.float32)
         bp = cv2.calcBackProject([grey], [0], keep.reshape(-1, 1), [0, 256], 255)
         cv2.imwrite(os.path.join(d, f"backproject_{bins}.pgm"), bp)
+    h, w = grey.shape
+    ell5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    for f in (4, 8):
+        if w % f or h % f:
+            continue
+        mean = cv2.resize(grey.astype(np.float64), (w // f, h // f), interpolation=cv2.INTER_AREA)
+        low = np.floor(16.0 * mean + 0.5).astype(np.uint16)
+        low.astype("<u2").tofile(os.path.join(d, f"lowres_{f}.bin"))
+        grad = cv2.morphologyEx(low, cv2.MORPH_GRADIENT, ell5)
+        grad.astype("<u2").tofile(os.path.join(d, f"lowgrad_{f}.bin"))
     with open(os.path.join(d, "otsu.json"), "w") as f:
         json.dump({"otsu": int(t), "components": n - 1, "cc": cc}, f)
 

@@ -166,6 +166,14 @@ impl Moments {
     /// and host; `micromath`'s sqrt is a few-percent approximation).
     pub fn principal_axes(&self) -> (f32, f32, f32) {
         let (a, b, c) = self.covariance();
+        principal_axes_of(a, b, c)
+    }
+}
+
+/// PCA of a covariance `(c_xx, c_yy, c_xy)`: `(angle, λ₁, λ₂)` as
+/// [`Moments::principal_axes`].
+pub fn principal_axes_of(a: f32, b: f32, c: f32) -> (f32, f32, f32) {
+    {
         let half_tr = 0.5 * (a + b);
         let d = libm::sqrtf(0.25 * (a - b) * (a - b) + c * c);
         let l1 = half_tr + d;

@@ -43,6 +43,8 @@ pub use params::Params;
 pub use segment::{segment_frame, workspace_size, SegmentError, SegmentStats};
 pub mod hist;
 pub mod label;
+pub mod lowres;
 pub mod morph;
+pub mod noise;
 pub mod segment;
 pub mod threshold;

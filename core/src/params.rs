@@ -61,6 +61,23 @@ pub struct Params {
     pub backprojection: bool,
     /// Ablation switch: reject objects by variance, eq. (5)–(6).
     pub variance_rejection: bool,
+    /// Downsampling factor of the coarse localisation pass (Section III.A,
+    /// beyond the paper): the mesh-free frame is box-averaged `f × f`
+    /// before the morphological gradient, which averages noise down so dim
+    /// fish stand out, and the gradient is thresholded with hysteresis
+    /// (`crate::segment::coarse`). 1 is the paper's full-resolution
+    /// gradient with one global threshold; otherwise 4 to 16. Default 4.
+    pub coarse_scale: u8,
+    /// Rule of the variance test, eq. (6): `false` (default) compares the
+    /// object's variance *in excess of the frame's measured noise
+    /// variance* with θ_V scaled to that noise
+    /// (`crate::segment::local`, beyond the paper); `true` is the paper's
+    /// literal `σ_k² ≥ θ_V`.
+    pub variance_literal: bool,
+    /// Smallest elongation `√(λ₁/λ₂)` of an output object (beyond the
+    /// paper; `crate::segment::local::elongated_enough`); 1 turns the test
+    /// off. Default 2.
+    pub min_elongation: f32,
 
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
     /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
@@ -101,6 +118,9 @@ impl Default for Params {
             double_threshold: true,
             backprojection: true,
             variance_rejection: true,
+            coarse_scale: 4,
+            variance_literal: false,
+            min_elongation: 2.0,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,
@@ -177,6 +197,7 @@ impl Params {
             ("theta_bp", self.theta_bp),
             ("var_min", self.var_min),
             ("ellipse_scale", self.ellipse_scale),
+            ("min_elongation", self.min_elongation),
             ("v_ref_x", self.v_ref_x),
             ("v_ref_y", self.v_ref_y),
             ("alpha", self.alpha),
@@ -228,6 +249,16 @@ impl Params {
             "ellipse_scale",
             (1.0..=4.0).contains(&self.ellipse_scale),
             "1 ≤ ellipse_scale ≤ 4",
+        )?;
+        range(
+            "coarse_scale",
+            self.coarse_scale == 1 || (4..=16).contains(&self.coarse_scale),
+            "1, or 4 to 16",
+        )?;
+        range(
+            "min_elongation",
+            (0.0..=10.0).contains(&self.min_elongation),
+            "0 ≤ min_elongation ≤ 10",
         )?;
         let vr = self.v_ref_x * self.v_ref_x + self.v_ref_y * self.v_ref_y;
         range("v_ref_x", vr > 1e-12, "v_ref must not be the zero vector")?;
@@ -312,5 +343,17 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(p.validate().unwrap_err().key(), "disk_size");
+        for bad in [0u8, 2, 3, 17] {
+            let p = Params {
+                coarse_scale: bad,
+                ..Params::default()
+            };
+            assert_eq!(p.validate().unwrap_err().key(), "coarse_scale");
+        }
+        let p = Params {
+            min_elongation: f32::NAN,
+            ..Params::default()
+        };
+        assert_eq!(p.validate().unwrap_err().key(), "min_elongation");
     }
 }

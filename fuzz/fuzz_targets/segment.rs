@@ -112,6 +112,9 @@ fuzz_target!(|data: &[u8]| {
     p.refine_range = b.u32v(p.refine_range);
     p.refine_block = b.u8v(p.refine_block);
     p.tail_compensation = b.boolv(p.tail_compensation);
+    p.coarse_scale = b.u8v(p.coarse_scale);
+    p.variance_literal = b.boolv(p.variance_literal);
+    p.min_elongation = b.f32(p.min_elongation);
 
     // Pixels: the rest of the input, cycled; a flat grey frame when empty.
     let pixels = b.0;

@@ -5,7 +5,11 @@
 //!
 //! ```text
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
-//!     [--no-var] [--bins N] [--out DIR] HAUL...
+//!     [--no-var] [--bins N] [--paper] [--literal-var]
+//!     [--full-res-coarse] [--var-min X] [--elong X] [--out DIR] HAUL...
+//!
+//! `--paper` runs the paper's Section III alone (full-resolution coarse
+//! gradient with one global threshold, literal θ_V, no elongation test).
 //! ```
 
 use std::path::PathBuf;
@@ -18,6 +22,8 @@ use fishtrack_core::params::Params;
 fn main() -> Result<()> {
     let mut args = std::env::args().skip(1);
     let (mut single, mut no_bp, mut no_var, mut bins) = (false, false, false, None);
+    let (mut paper, mut literal, mut scale1) = (false, false, false);
+    let (mut var_min, mut elong): (Option<f32>, Option<f32>) = (None, None);
     let mut out = std::env::temp_dir().join("seg_eval");
     let mut hauls = Vec::new();
     while let Some(a) = args.next() {
@@ -25,6 +31,11 @@ fn main() -> Result<()> {
             "--single" => single = true,
             "--no-bp" => no_bp = true,
             "--no-var" => no_var = true,
+            "--paper" => paper = true,
+            "--literal-var" => literal = true,
+            "--full-res-coarse" => scale1 = true,
+            "--var-min" => var_min = Some(args.next().context("--var-min X")?.parse()?),
+            "--elong" => elong = Some(args.next().context("--elong X")?.parse()?),
             "--bins" => bins = Some(args.next().context("--bins N")?.parse::<u8>()?),
             "--out" => out = PathBuf::from(args.next().context("--out DIR")?),
             s if s.starts_with("--") => bail!("unknown option {s}"),
@@ -45,6 +56,21 @@ fn main() -> Result<()> {
         p.variance_rejection = !no_var;
         if let Some(b) = bins {
             p.hist_bins = b;
+        }
+        if paper {
+            // the paper's pipeline: no step beyond Section III
+            (literal, scale1) = (true, true);
+            p.min_elongation = 1.0;
+        }
+        p.variance_literal = literal;
+        if scale1 {
+            p.coarse_scale = 1;
+        }
+        if let Some(v) = var_min {
+            p.var_min = v;
+        }
+        if let Some(e) = elong {
+            p.min_elongation = e;
         }
         let name = haul
             .file_name()

@@ -8,6 +8,7 @@ mod support;
 
 use fishtrack_core::hist::{add_row_256, bin_of, fold_bins, ratio_backprojection_lut};
 use fishtrack_core::label::label_components;
+use fishtrack_core::lowres::{box_mean16, gradient_disk_u16};
 use fishtrack_core::morph::{
     close_disk_in_place, dilate_disk, disk_scratch_len, erode_disk, gradient_disk, median3_binary,
     open_disk_in_place, remove_mesh, Disk,
@@ -177,6 +178,33 @@ fn check_frame(w: usize, h: usize, grey: &[u8], seed: u64) {
         );
         assert!(bin_of(255, bins) == bins - 1);
     }
+    // reduced-resolution coarse pass: INTER_AREA downsample (×16, rounded)
+    // and the 16-bit morphological gradient by the 5 × 5 ellipse
+    for f in [4usize, 8] {
+        let path = d.join(format!("lowres_{f}.bin"));
+        if w % f != 0 || h % f != 0 {
+            assert!(!path.exists());
+            continue;
+        }
+        let read16 = |p: &std::path::Path| -> Vec<u16> {
+            std::fs::read(p)
+                .unwrap()
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect()
+        };
+        let (lw, lh) = (w / f, h / f);
+        let mut low = vec![0u16; lw * lh];
+        assert_eq!(box_mean16(v, f, &mut low), Ok((lw, lh)));
+        assert_eq!(low, read16(&path), "INTER_AREA downsample by {f}");
+        let mut g = vec![0u16; lw * lh];
+        gradient_disk_u16(&low, lw, lh, &Disk::opencv_ellipse(5), &mut g).unwrap();
+        assert_eq!(
+            g,
+            read16(&d.join(format!("lowgrad_{f}.bin"))),
+            "16-bit gradient at 1/{f}"
+        );
+    }
     eprintln!("OpenCV oracle: {w}x{h}: Otsu {t}, {n} components, all primitives identical");
 }
 
@@ -190,7 +218,14 @@ fn primitives_equal_opencv_on_a_drawn_haul_frame() {
 
 #[test]
 fn primitives_equal_opencv_on_noise_and_odd_sizes() {
-    for (w, h, seed) in [(97usize, 61usize, 1u64), (7, 5, 2), (1, 9, 3), (33, 1, 4)] {
+    for (w, h, seed) in [
+        (97usize, 61usize, 1u64),
+        (7, 5, 2),
+        (1, 9, 3),
+        (33, 1, 4),
+        (64, 40, 5),
+        (8, 8, 6),
+    ] {
         let mut rng = Lcg(seed);
         let grey: Vec<u8> = (0..w * h).map(|_| (rng.next() * 256.0) as u8).collect();
         check_frame(w, h, &grey, seed);

@@ -2,11 +2,20 @@
 //! Section V.A) on one rectified 8-bit frame.
 //!
 //! Stages, data flowing one way:
-//! 1. [`coarse`]: trawl-mesh removal, 7 × 7 morphological gradient, global
-//!    threshold, connected components → elliptic local regions (III.A).
+//! 1. [`coarse`]: trawl-mesh removal, morphological gradient (by default
+//!    on the frame box-averaged 4 × 4, with a hysteresis threshold — beyond
+//!    the paper; `coarse_scale = 1` is the paper's 7 × 7 gradient at full
+//!    resolution with one global threshold), connected components →
+//!    elliptic local regions (III.A).
 //! 2. [`local`], per region: double local thresholding (eq. (1)), 3 × 3
 //!    median, histogram backprojection (eq. (2)–(3)), area and variance
-//!    rejection (eq. (4)–(6)), closing then opening (III.D).
+//!    rejection (eq. (4)–(6); by default the variance limit follows the
+//!    frame's measured noise, [`local::variance_limit`]), closing then
+//!    opening (III.D), and (beyond the paper) an elongation test on the
+//!    final objects ([`local::elongated_enough`]).
+//!
+//! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
+//! .. }` is the paper's Section III exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
 //!
@@ -33,7 +42,9 @@
 //!
 //! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
 //! `workspace_size(2048, 2048, 1 << 20)` = 18 098 496 bytes (17.3 MiB):
-//! 8 MiB for the two frame buffers, 1 MiB for the morphology ring (sized
+//! 8 MiB for the two frame buffers (the second one, the full-resolution
+//! gradient, also holds the 4 × 4-downsampled frame, its gradient, labels
+//! and masks: 2.5 MiB, so the reduced-resolution pass costs no memory), 1 MiB for the morphology ring (sized
 //! for disks up to 31 × 31), about 0.3 MiB of labelling tables and region
 //! records, and 8 MiB of ROI buffers (measured by the
 //! `full_size_frame_with_recommended_capacities` test). Recommended output
@@ -48,7 +59,7 @@ pub mod local;
 mod workspace;
 
 pub use workspace::{
-    fixed_size, workspace_size, BYTES_PER_ROI_PIXEL, MAX_REGIONS, MAX_ROI_COMPONENTS,
+    fixed_size, lowres_size, workspace_size, BYTES_PER_ROI_PIXEL, MAX_REGIONS, MAX_ROI_COMPONENTS,
 };
 
 use crate::error::{ImageError, ParamError};
@@ -109,11 +120,22 @@ impl core::fmt::Display for SegmentError {
 impl core::error::Error for SegmentError {}
 
 /// Per-step counters of one [`segment_frame`] call.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SegmentStats {
-    /// Global threshold applied to the morphological gradient.
-    pub gradient_threshold: u8,
+    /// Global threshold applied to the morphological gradient (the high,
+    /// seed threshold of the hysteresis at reduced resolution). Grey
+    /// levels at `coarse_scale` 1, sixteenths of a grey level otherwise.
+    pub gradient_threshold: u16,
+    /// The low (growing) threshold of the hysteresis; equals
+    /// `gradient_threshold` at `coarse_scale` 1.
+    pub gradient_threshold_low: u16,
+    /// The frame's robust white-noise σ, sixteenths of a grey level
+    /// ([`crate::noise::noise_sigma16`] on the rectified input frame).
+    pub noise_sigma16: u32,
+    /// The variance limit eq. (6) applied (θ_V, or θ_V scaled to the
+    /// measured noise; see [`local`]).
+    pub var_limit: f32,
     /// Connected components of the thresholded gradient.
     pub coarse_components: u32,
     /// Of those, skipped as smaller than `area_min / 4`.
@@ -133,6 +155,9 @@ pub struct SegmentStats {
     pub rejected_area: u32,
     /// Components rejected by variance, eq. (5)–(6).
     pub rejected_variance: u32,
+    /// Final objects rejected by the elongation test
+    /// ([`local::elongated_enough`]).
+    pub rejected_shape: u32,
     /// Components past [`MAX_ROI_COMPONENTS`] in one region (not examined).
     pub label_overflow: u32,
     /// Objects of the same fish found in overlapping regions (removed).
@@ -219,6 +244,8 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
     let n_regions = coarse::coarse_regions(img, params, &mut ws, &mut stats)?;
     let n = w * h;
     let frame = ImageView::packed(&ws.filtered[..n], w, h).map_err(SegmentError::Image)?;
+    stats.noise_sigma16 = crate::noise::noise_sigma16(img);
+    stats.var_limit = local::variance_limit(params, stats.noise_sigma16);
     for rw in ws.regions.iter().take(n_regions) {
         let region = coarse::decode_region(rw);
         stats.regions += 1;

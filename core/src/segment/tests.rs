@@ -308,6 +308,8 @@ proptest! {
         disk in prop::sample::select(vec![1u8, 3, 7, 15]),
         mesh in prop::sample::select(vec![1u8, 3, 7]),
         amin in 1u32..200,
+        scale in prop::sample::select(vec![1u8, 4, 7, 16]), literal in any::<bool>(),
+        elong in 0.0f32..4.0,
     ) {
         let mut rng = Lcg(seed);
         let fish: Vec<Fish> = (0..nfish).map(|_| Fish {
@@ -319,7 +321,8 @@ proptest! {
         let p = Params {
             double_threshold: dt, backprojection: bp, variance_rejection: vr,
             hist_bins: bins, disk_size: disk, mesh_line_len: mesh, area_min: amin,
-            var_min: 0.0, ..Params::default()
+            var_min: 0.0, coarse_scale: scale, variance_literal: literal,
+            min_elongation: elong, ..Params::default()
         };
         let mut ws = vec![0u8; workspace_size(w, h, roi)];
         let mut out: Objects<8, 256> = Objects::new();
@@ -337,6 +340,15 @@ proptest! {
             }
             prop_assert!(o.obb.half_w >= o.obb.half_h - 1e-3);
             prop_assert!(o.mean >= 0.0 && o.mean <= 255.0);
+            if elong > 1.0 {
+                // the elongation test, on the output mask's covariance
+                let mut m = crate::label::Moments::EMPTY;
+                for r in runs {
+                    m.add_run(r.y as u32, r.x0 as u32, r.x1 as u32);
+                }
+                let (_, l1, l2) = m.principal_axes();
+                prop_assert!(l1 >= elong * elong * l2 * 0.999);
+            }
         }
     }
 }

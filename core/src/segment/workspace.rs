@@ -23,13 +23,38 @@ pub const BYTES_PER_ROI_PIXEL: usize = 8;
 
 const SLACK: usize = 8; // alignment padding per part
 
+/// Smallest reduced-resolution factor of the coarse pass other than 1
+/// (`Params::coarse_scale`): it sizes the reduced-resolution buffers.
+pub const MIN_COARSE_SCALE: usize = 4;
+
+/// Bins of the coarse gradient's median/MAD histograms (values clamped).
+pub(crate) const LOW_HIST_BINS: usize = 1024;
+
+/// Bytes of the reduced-resolution buffers of the coarse pass for a
+/// `width × height` frame: per low-resolution pixel the downsampled frame
+/// and its gradient (`u16` each), a label (`i32`), a mask and a seed flag
+/// (`u8` each), plus two histograms. They live in the gradient buffer,
+/// which the reduced-resolution pass does not otherwise need.
+pub const fn lowres_size(width: usize, height: usize) -> usize {
+    let (lw, lh) = crate::lowres::low_size(width, height, MIN_COARSE_SCALE);
+    lw * lh * 10 + 2 * LOW_HIST_BINS * 4 + 6 * SLACK
+}
+
+const fn max(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
 /// Bytes of the frame-sized part of the workspace (everything but the ROI
 /// buffers) for a `width × height` frame.
 pub const fn fixed_size(width: usize, height: usize) -> usize {
     let n = width * height;
     let t = StreamLabeler::table_len(width);
     let r = StreamLabeler::runs_len(width);
-    2 * n                                   // mesh-free frame, gradient / tmp
+    n + max(n, lowres_size(width, height))  // mesh-free frame, gradient / tmp
         + disk_scratch_len(width, MAX_SE / 2)
         + t * SLOT_WORDS * 8 + t * 4        // label slots, free list
         + 2 * r * RUN_WORDS * 4             // run rows
@@ -83,6 +108,39 @@ fn carve<T: bytemuck::Pod>(ws: &mut [u8], n: usize) -> Option<(&mut [T], &mut [u
     Some((typed, rest))
 }
 
+/// The reduced-resolution buffers of the coarse pass (`n` pixels each).
+pub(crate) struct LowBufs<'a> {
+    pub img: &'a mut [u16],
+    pub grad: &'a mut [u16],
+    pub labels: &'a mut [i32],
+    pub mask: &'a mut [u8],
+    pub seeded: &'a mut [u8],
+    pub hist: &'a mut [u32],
+    pub dev: &'a mut [u32],
+}
+
+impl<'a> LowBufs<'a> {
+    /// Carves `buf` for `n` low-resolution pixels.
+    pub fn carve(buf: &'a mut [u8], n: usize) -> Option<LowBufs<'a>> {
+        let (img, buf) = carve::<u16>(buf, n)?;
+        let (grad, buf) = carve::<u16>(buf, n)?;
+        let (labels, buf) = carve::<i32>(buf, n)?;
+        let (hist, buf) = carve::<u32>(buf, LOW_HIST_BINS)?;
+        let (dev, buf) = carve::<u32>(buf, LOW_HIST_BINS)?;
+        let (mask, buf) = carve::<u8>(buf, n)?;
+        let (seeded, _) = carve::<u8>(buf, n)?;
+        Some(LowBufs {
+            img,
+            grad,
+            labels,
+            mask,
+            seeded,
+            hist,
+            dev,
+        })
+    }
+}
+
 impl<'a> Ws<'a> {
     /// Carves `ws` for a `width × height` frame; the ROI capacity is what
     /// is left. `None` when even the frame part does not fit.
@@ -91,7 +149,7 @@ impl<'a> Ws<'a> {
         let t = StreamLabeler::table_len(width);
         let r = StreamLabeler::runs_len(width);
         let (filtered, ws) = carve::<u8>(ws, n)?;
-        let (grad, ws) = carve::<u8>(ws, n)?;
+        let (grad, ws) = carve::<u8>(ws, max(n, lowres_size(width, height)))?;
         let (disk, ws) = carve::<u8>(ws, disk_scratch_len(width, MAX_SE / 2))?;
         let (slots, ws) = carve::<[u64; SLOT_WORDS]>(ws, t)?;
         let (free, ws) = carve::<u32>(ws, t)?;

@@ -66,8 +66,15 @@ pub struct RefObject {
 /// Everything the reference computed for one frame.
 #[derive(Debug, Clone, Default)]
 pub struct RefResult {
-    /// Threshold on the morphological gradient.
-    pub gradient_threshold: u8,
+    /// Threshold on the morphological gradient (the seed threshold of the
+    /// hysteresis at reduced resolution, in 1/16 grey levels there).
+    pub gradient_threshold: u16,
+    /// The hysteresis' low threshold (= `gradient_threshold` at scale 1).
+    pub gradient_threshold_low: u16,
+    /// Measured white-noise σ of the input frame, 1/16 grey levels.
+    pub noise_sigma16: u32,
+    /// The variance limit of eq. (6) used.
+    pub var_limit: f64,
     /// Local regions, in processing order.
     pub regions: Vec<RefRegion>,
     /// Objects after duplicate removal.
@@ -150,6 +157,18 @@ pub fn gradient_threshold(g: &GrayImage) -> u8 {
     let mut dev: Vec<u32> = v.iter().map(|&x| x.abs_diff(med)).collect();
     let mad = lower_median(&mut dev).max(1);
     (med + 4 * mad).min(255) as u8
+}
+
+/// PCA of a covariance: angle of the first axis in (−π/2, π/2], λ₁, λ₂.
+fn pca_of(a: f64, b: f64, c: f64) -> (f64, f64, f64) {
+    let d = (0.25 * (a - b) * (a - b) + c * c).sqrt();
+    let l1 = 0.5 * (a + b) + d;
+    let l2 = (0.5 * (a + b) - d).max(0.0);
+    let mut angle = 0.5 * (2.0 * c).atan2(a - b);
+    if angle <= -std::f64::consts::FRAC_PI_2 {
+        angle += std::f64::consts::PI;
+    }
+    (angle, l1, l2)
 }
 
 /// PCA of a pixel set: centroid, angle, λ₁, λ₂ (population covariance).
@@ -246,28 +265,206 @@ fn oriented_box(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
     }
 }
 
+/// Reduced-resolution coarse pass (core: `segment::coarse`, beyond the
+/// paper): `f × f` block means × 16 rounded half up (partial border blocks
+/// average what they have), gradient by the `COARSE_LOW_DISK` ellipse on
+/// those values, hysteresis `med + K·max(MAD, 1)` with lower medians.
+/// Returns the kept components as full-resolution regions' pixel
+/// statistics `(cx, cy, cov_xx, cov_yy, cov_xy)` and the two thresholds.
+pub fn coarse_low(filtered: &GrayImage, p: &Params) -> (Vec<[f64; 5]>, u16, u16) {
+    use fishtrack_core::segment::coarse::{COARSE_K_HIGH, COARSE_K_LOW, COARSE_LOW_DISK};
+    let f = p.coarse_scale as u32;
+    let (w, h) = filtered.dimensions();
+    let (lw, lh) = (w.div_ceil(f), h.div_ceil(f));
+    let mut low = vec![0.0f64; (lw * lh) as usize];
+    for ly in 0..lh {
+        for lx in 0..lw {
+            let (mut sum, mut cnt) = (0.0, 0.0);
+            for y in ly * f..((ly + 1) * f).min(h) {
+                for x in lx * f..((lx + 1) * f).min(w) {
+                    sum += filtered.get_pixel(x, y).0[0] as f64;
+                    cnt += 1.0;
+                }
+            }
+            low[(ly * lw + lx) as usize] = (16.0 * sum / cnt + 0.5).floor();
+        }
+    }
+    // the disk's offsets from OpenCV's MORPH_ELLIPSE formula
+    let r = (COARSE_LOW_DISK / 2) as i64;
+    let rf = r as f64;
+    let mut offs = Vec::new();
+    for dy in -r..=r {
+        let hw = if r > 0 {
+            (rf * ((rf * rf - (dy * dy) as f64) / (rf * rf)).max(0.0).sqrt()).round() as i64
+        } else {
+            0
+        };
+        for dx in -hw..=hw {
+            offs.push((dx, dy));
+        }
+    }
+    let mut g = vec![0u32; low.len()];
+    for y in 0..lh as i64 {
+        for x in 0..lw as i64 {
+            let vals: Vec<f64> = offs
+                .iter()
+                .filter_map(|&(dx, dy)| {
+                    let (xx, yy) = (x + dx, y + dy);
+                    (xx >= 0 && yy >= 0 && xx < lw as i64 && yy < lh as i64)
+                        .then(|| low[(yy * lw as i64 + xx) as usize])
+                })
+                .collect();
+            let mx = vals.iter().cloned().fold(f64::MIN, f64::max);
+            let mn = vals.iter().cloned().fold(f64::MAX, f64::min);
+            g[(y * lw as i64 + x) as usize] = (mx - mn) as u32;
+        }
+    }
+    let mut v = g.clone();
+    let med = lower_median(&mut v);
+    let mut dev: Vec<u32> = g.iter().map(|&x| x.abs_diff(med)).collect();
+    let mad = lower_median(&mut dev).max(1);
+    let t_low = (med + COARSE_K_LOW * mad).min(u16::MAX as u32) as u16;
+    let t_high = (med + COARSE_K_HIGH * mad).min(u16::MAX as u32) as u16;
+    let mask = GrayImage::from_fn(lw, lh, |x, y| {
+        Luma([if g[(y * lw + x) as usize] > t_low as u32 {
+            255
+        } else {
+            0
+        }])
+    });
+    let min_coarse = (p.area_min / 4).max(1) as f64;
+    let ff = f as f64;
+    let mut out = Vec::new();
+    for comp in components(&mask) {
+        if (comp.len() as f64) * ff * ff < min_coarse {
+            continue;
+        }
+        if !comp
+            .iter()
+            .any(|&(x, y)| g[(y * lw + x) as usize] > t_high as u32)
+        {
+            continue;
+        }
+        let n = comp.len() as f64;
+        let mx = comp.iter().map(|q| q.0 as f64).sum::<f64>() / n;
+        let my = comp.iter().map(|q| q.1 as f64).sum::<f64>() / n;
+        let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+        for &(x, y) in &comp {
+            let (dx, dy) = (x as f64 - mx, y as f64 - my);
+            a += dx * dx;
+            b += dy * dy;
+            c += dx * dy;
+        }
+        // a low pixel X covers full pixels f·X .. f·X + f − 1
+        let extra = (ff * ff - 1.0) / 12.0;
+        out.push([
+            ff * mx + 0.5 * (ff - 1.0),
+            ff * my + 0.5 * (ff - 1.0),
+            ff * ff * a / n + extra,
+            ff * ff * b / n + extra,
+            ff * ff * c / n,
+        ]);
+    }
+    (out, t_low, t_high)
+}
+
+/// Robust white-noise σ of `img` in 1/16 grey levels (core:
+/// `noise::noise_sigma16`): d = a − b − c + e over disjoint 2 × 2 blocks,
+/// σ = 1.4826 · median|d| / 2 with the median of the integer |d| taken as
+/// the grouped-data median (values of k spread over [k − ½, k + ½), 0
+/// over [0, ½)).
+pub fn noise_sigma16(img: &GrayImage) -> u32 {
+    let (w, h) = img.dimensions();
+    let px = |x: u32, y: u32| img.get_pixel(x, y).0[0] as i64;
+    let mut d: Vec<u64> = Vec::new();
+    for by in 0..h / 2 {
+        for bx in 0..w / 2 {
+            let (x, y) = (2 * bx, 2 * by);
+            d.push((px(x, y) - px(x + 1, y) - px(x, y + 1) + px(x + 1, y + 1)).unsigned_abs());
+        }
+    }
+    if d.is_empty() {
+        return 0;
+    }
+    d.sort_unstable();
+    let half = d.len() as f64 / 2.0;
+    // the group holding the half-way point: the smallest k with
+    // #(|d| ≤ k) ≥ n/2
+    let below = |k: u64| d.partition_point(|&v| v < k) as f64;
+    let k = d[d.len().div_ceil(2) - 1];
+    let cnt = below(k + 1) - below(k);
+    let (lo, width) = if k == 0 {
+        (0.0, 0.5)
+    } else {
+        (k as f64 - 0.5, 1.0)
+    };
+    let med = if cnt > 0.0 {
+        lo + width * (half - below(k)) / cnt
+    } else {
+        lo
+    };
+    let s = 16.0 * 1.4826 * med / 2.0;
+    if s.is_finite() && s > 0.0 {
+        (s + 0.5) as u32
+    } else {
+        0
+    }
+}
+
 /// Segments one frame.
 pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
     let (w, h) = img.dimensions();
     let disk = opencv_ellipse_mask(p.disk_size);
     let filtered = remove_mesh(img, p.mesh_line_len);
-    let g = gradient(&filtered, &disk);
-    let t = gradient_threshold(&g);
-    let mut fg = GrayImage::new(w, h);
-    for (o, q) in fg.pixels_mut().zip(g.pixels()) {
-        o.0[0] = if q.0[0] > t { 255 } else { 0 };
-    }
+    let noise16 = noise_sigma16(img);
+    let var_limit = if p.variance_literal {
+        p.var_min as f64
+    } else {
+        let s = noise16 as f64 / 16.0;
+        p.var_min as f64 * (s * s / fishtrack_core::segment::local::NOISE_REF_VAR as f64).min(1.0)
+    };
     let mut res = RefResult {
-        gradient_threshold: t,
+        noise_sigma16: noise16,
+        var_limit,
         ..RefResult::default()
     };
-    let min_coarse = (p.area_min / 4).max(1) as usize;
-    let (amin, amax) = (p.area_min as usize, p.area_max as usize);
-    for comp in components(&fg) {
-        if comp.len() < min_coarse {
-            continue;
+    // coarse components as (cx, cy, cov_xx, cov_yy, cov_xy)
+    let coarse: Vec<[f64; 5]> = if p.coarse_scale > 1 {
+        let (c, tl, th) = coarse_low(&filtered, p);
+        res.gradient_threshold = th;
+        res.gradient_threshold_low = tl;
+        c
+    } else {
+        let g = gradient(&filtered, &disk);
+        let t = gradient_threshold(&g);
+        res.gradient_threshold = t as u16;
+        res.gradient_threshold_low = t as u16;
+        let mut fg = GrayImage::new(w, h);
+        for (o, q) in fg.pixels_mut().zip(g.pixels()) {
+            o.0[0] = if q.0[0] > t { 255 } else { 0 };
         }
-        let (cx, cy, angle, l1, l2) = pca(&comp);
+        let min_coarse = (p.area_min / 4).max(1) as usize;
+        components(&fg)
+            .into_iter()
+            .filter(|c| c.len() >= min_coarse)
+            .map(|comp| {
+                let n = comp.len() as f64;
+                let mx = comp.iter().map(|q| q.0 as f64).sum::<f64>() / n;
+                let my = comp.iter().map(|q| q.1 as f64).sum::<f64>() / n;
+                let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+                for &(x, y) in &comp {
+                    let (dx, dy) = (x as f64 - mx, y as f64 - my);
+                    a += dx * dx;
+                    b += dy * dy;
+                    c += dx * dy;
+                }
+                [mx, my, a / n, b / n, c / n]
+            })
+            .collect()
+    };
+    let (amin, amax) = (p.area_min as usize, p.area_max as usize);
+    for &[cx, cy, ca, cb, cc] in &coarse {
+        let (angle, l1, l2) = pca_of(ca, cb, cc);
         let s = p.ellipse_scale as f64;
         let a = (2.0 * l1.sqrt()).max(0.5) * s;
         let b = (2.0 * l2.sqrt()).max(0.5) * s;
@@ -401,7 +598,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 continue;
             }
             let (_, var) = mean_var(&roi_img, &comp);
-            if p.variance_rejection && var < p.var_min as f64 {
+            if p.variance_rejection && var < var_limit {
                 continue;
             }
             for &(x, y) in &comp {
@@ -412,6 +609,12 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         let post = open(&close(&kept, &disk), &disk);
         for comp in components(&post) {
             if comp.len() < amin || comp.len() > amax {
+                continue;
+            }
+            // elongation test (core: `local::elongated_enough`)
+            let e = p.min_elongation as f64;
+            let (_, _, _, l1, l2) = pca(&comp);
+            if e > 1.0 && l1 < e * e * l2 {
                 continue;
             }
             let (mean, variance) = mean_var(&roi_img, &comp);

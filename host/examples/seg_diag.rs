@@ -1,0 +1,65 @@
+//! Diagnostic dump (development aid): per segmented object of every left
+//! frame, its raw box and features, as CSV on stdout.
+//! `seg_diag [--no-var] [--literal] HAUL...`
+use anyhow::Result;
+use fishtrack::detect::{detection_rows, load_calibration};
+use fishtrack::haul::Haul;
+use fishtrack::rectify::Rectifier;
+use fishtrack_core::image::ImageView;
+use fishtrack_core::object::Objects;
+use fishtrack_core::params::Params;
+use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI_PIXELS};
+
+fn main() -> Result<()> {
+    let mut no_var = false;
+    let mut literal = false;
+    let mut hauls = vec![];
+    for a in std::env::args().skip(1) {
+        match a.as_str() {
+            "--no-var" => no_var = true,
+            "--literal" => literal = true,
+            _ => hauls.push(a),
+        }
+    }
+    println!("haul,frame,x,y,w,h,len,area,mean,var,hw,hh,gt,noise16,vlim");
+    for hp in hauls {
+        let haul = Haul::open(std::path::Path::new(&hp))?;
+        let calib = load_calibration(&haul)?;
+        let (w, h) = (calib.width as usize, calib.height as usize);
+        let rect = Rectifier::new(&calib);
+        let mut p = Params::for_frame(calib.width);
+        p.variance_rejection = !no_var;
+        p.variance_literal = literal;
+        let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
+        let mut objs: Box<Objects<64, 16384>> = Box::default();
+        for pair in &haul.frames {
+            let (left, _) = haul.load_pair(pair, Some((calib.width, calib.height)))?;
+            let rl = rect.left_map.apply(&left)?;
+            let view = ImageView::packed(rl.as_raw(), w, h).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let st =
+                segment_frame(view, &p, &mut ws, &mut objs).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let rows = detection_rows(pair.index, &objs, &rect.left);
+            for (r, o) in rows.iter().zip(objs.items.iter()) {
+                println!(
+                    "{},{},{:.1},{:.1},{:.1},{:.1},{:.1},{},{:.2},{:.2},{:.1},{:.1},{},{},{:.2}",
+                    hp,
+                    pair.index,
+                    r.bbox[0],
+                    r.bbox[1],
+                    r.bbox[2],
+                    r.bbox[3],
+                    r.length_px.unwrap_or(-1.0),
+                    o.area,
+                    o.mean,
+                    o.variance,
+                    o.obb.half_w,
+                    o.obb.half_h,
+                    st.gradient_threshold,
+                    st.noise_sigma16,
+                    st.var_limit
+                );
+            }
+        }
+    }
+    Ok(())
+}
