@@ -1,7 +1,7 @@
 //! `fishtrack bench HAUL [--json]`: where the time goes (issue 8).
 //!
-//! Every figure is the median of repeated runs (`--repeats`, default 3) on
-//! the haul's frames (`--frames N`: the first N pairs):
+//! Every figure is the median over repeated runs (`--repeats`, default 3)
+//! of each run's mean per pair, on the haul's frames (`--frames N`: the first N pairs):
 //! - `read`, `rectify`: decoding both files, remapping both frames (host;
 //!   both sides in parallel), per pair;
 //! - `mesh_removal` (Section V.A), `coarse` (7 × 7 gradient, global
@@ -101,6 +101,18 @@ pub struct BenchReport {
     pub workspace_bytes: usize,
     /// Worker threads of the host's pool.
     pub threads: usize,
+}
+
+/// The median over runs of each run's mean: `v` holds `n` per-pair
+/// samples per run, run after run. A per-pair median would hide stages
+/// that only some frames need (stereo, length and tracking are zero on
+/// frames without fish), so each run is summarised by its mean first.
+fn median_of_run_means(v: &[f64], n: usize) -> f64 {
+    let mut means: Vec<f64> = v
+        .chunks(n.max(1))
+        .map(|c| c.iter().sum::<f64>() / c.len() as f64)
+        .collect();
+    median(&mut means)
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -207,11 +219,14 @@ pub fn bench(dir: &Path, opts: &BenchOptions) -> Result<BenchReport> {
     let mut samples: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
     let mut push = |k: &'static str, s: f64| samples.entry(k).or_default().push(s * 1e3);
 
+    // progress on a terminal: four passes over the pairs per run
+    let bar = crate::progress::bar((4 * repeats * n) as u64, "bench", "pairs");
     // 1. read + rectify, sequential per pair (both sides in parallel)
     let mut frames = Vec::with_capacity(n);
     for rep in 0..repeats {
         for pair in pairs {
             let rp = rectify_one(&setup, pair)?;
+            bar.inc(1);
             push("read", rp.read_s);
             push("rectify", rp.rectify_s);
             if rep == 0 {
@@ -247,6 +262,7 @@ pub fn bench(dir: &Path, opts: &BenchOptions) -> Result<BenchReport> {
                 InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
             })?;
             push("core_total", t_pair.elapsed().as_secs_f64());
+            bar.inc(1);
             push("segmentation", st[0]);
             push("stereo", st[1]);
             push("length", st[2]);
@@ -263,6 +279,7 @@ pub fn bench(dir: &Path, opts: &BenchOptions) -> Result<BenchReport> {
             let (lv, rv) = views(l, r)?;
             let (m1, c1, _) = bufs.time(lv, &setup)?;
             let (m2, c2, _) = bufs.time(rv, &setup)?;
+            bar.inc(1);
             push("mesh_removal", m1 + m2);
             push("coarse", c1 + c2);
             push(
@@ -286,16 +303,18 @@ pub fn bench(dir: &Path, opts: &BenchOptions) -> Result<BenchReport> {
                         format!("frame {}: pipeline: {e}", rp.pair.index),
                     )
                 })?;
+            bar.inc(1);
             Ok(())
         })?;
         e2e_rates.push(n as f64 / started.elapsed().as_secs_f64());
     }
+    bar.finish_and_clear();
     let stage_ms = STAGES
         .iter()
         .map(|&k| {
             (
                 k,
-                median(samples.get_mut(k).map(|v| &mut v[..]).unwrap_or(&mut [])),
+                median_of_run_means(samples.get(k).map_or(&[][..], |v| &v[..]), n),
             )
         })
         .collect();
