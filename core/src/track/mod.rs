@@ -24,6 +24,11 @@
 //!    the other fish started a new track; the former oldest-first order
 //!    let an older target take a younger one's fish whenever both were
 //!    plausible (perfect detections, 8 hauls: success 0.675 → 0.709).
+//!    The greedy assignment is then refined by pair exchanges on the total
+//!    increment ([`greedy::improve_pairs`], `swap_passes`): greedy can hand
+//!    two school mates entering side by side each other's fish when one
+//!    crossed pair happens to be close, while the joint optimum of both
+//!    first steps is the true one (8 hauls: 0.825 → 0.842 at 5 fps).
 //!    **MC / NN:** one node per stage, from a greedy one-to-one assignment
 //!    ([`greedy`]) on the matching cost (MC, accepted below `miss_cost`) or on
 //!    the distance to the prediction (NN, accepted when

@@ -8,7 +8,8 @@
 //! `min_sigma_samples`); the candidate gate; K − 1 cheapest real nodes plus
 //! one predicted node per stage; commit of the oldest stage along the best
 //! path with pruning at depth D; the joint selection of each frame's best
-//! nodes (greedy one-to-one on C_i + c_ij − min C) and the share cost;
+//! nodes (greedy one-to-one on C_i + c_ij − min C, refined by pair
+//! exchanges on the total, `swap_passes`) and the share cost;
 //! births (border margin or large area, none next to a lost target's
 //! prediction) and deaths (exit margin, `max_lost`); the newborn velocity
 //! (median displacement, else v_ref · W / 4.3); greedy MC/NN; capacities
