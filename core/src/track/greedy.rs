@@ -103,6 +103,52 @@ pub fn improve_pairs<const N: usize>(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    fn total(keys: &[[f32; 5]], out: &[Option<u16>], miss: f32) -> f32 {
+        out.iter()
+            .enumerate()
+            .map(|(r, c)| c.map_or(miss, |c| keys[r][c as usize]))
+            .sum()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
+        /// Pair exchanges keep the assignment one-to-one on finite keys,
+        /// never raise the total, and end 2-opt optimal.
+        #[test]
+        fn pair_exchanges_improve_greedy(
+            k in proptest::collection::vec(proptest::option::weighted(0.7, 0.0f32..24.0), 20)
+        ) {
+            let mut keys = [[f32::INFINITY; 5]; 4];
+            for (i, v) in k.iter().enumerate() {
+                keys[i / 5][i % 5] = v.unwrap_or(f32::INFINITY);
+            }
+            let miss = 24.0;
+            let mut out = [None; 4];
+            greedy_assign(&keys, 5, &mut out);
+            let before = total(&keys, &out, miss);
+            improve_pairs(&keys, miss, 0.0, 1000, &mut out);
+            let after = total(&keys, &out, miss);
+            prop_assert!(after <= before + 1e-3, "{after} > {before}");
+            let mut used = [false; 5];
+            for (r, c) in out.iter().enumerate() {
+                if let Some(c) = c {
+                    prop_assert!(keys[r][*c as usize].is_finite());
+                    prop_assert!(!used[*c as usize], "column {c} twice");
+                    used[*c as usize] = true;
+                }
+            }
+            for i in 0..4 {
+                for j in (i + 1)..4 {
+                    let mut sw = out;
+                    sw.swap(i, j);
+                    let t = total(&keys, &sw, miss);
+                    prop_assert!(!(t.is_finite() && t + 1e-3 < after), "swap {i} {j}: {t} < {after}");
+                }
+            }
+        }
+    }
 
     const I: f32 = f32::INFINITY;
 
