@@ -82,6 +82,9 @@ fn tweak(cfg: &mut TrackConfig) {
     if let Some(&c) = f.get(13) {
         cfg.lost_gate = c;
     }
+    if let Some(&c) = f.get(14) {
+        cfg.swap_passes = c as u8;
+    }
 }
 
 fn rate((c, n): (u64, u64)) -> f64 {

@@ -8,7 +8,8 @@
 //! `min_sigma_samples`); the candidate gate; K − 1 cheapest real nodes plus
 //! one predicted node per stage; commit of the oldest stage along the best
 //! path with pruning at depth D; the joint selection of each frame's best
-//! nodes (greedy one-to-one on C_i + c_ij − min C) and the share cost;
+//! nodes (greedy one-to-one on C_i + c_ij − min C, refined by pair
+//! exchanges on the total, `swap_passes`) and the share cost;
 //! births (border margin or large area, none next to a lost target's
 //! prediction) and deaths (exit margin, `max_lost`); the newborn velocity
 //! (median displacement, else v_ref · W / 4.3); greedy MC/NN; capacities
@@ -458,10 +459,50 @@ pub fn run(
             }
             pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
             let mut done = vec![false; targets.len()];
+            let mut sel: Vec<Option<usize>> = vec![None; targets.len()];
+            let mut key = std::collections::HashMap::new();
+            for &(inc, ti, ci) in &pairs {
+                key.insert((ti, ci), inc);
+            }
             for (_, ti, ci) in pairs {
                 if !done[ti] && owner[ci].is_none() {
                     done[ti] = true;
                     owner[ci] = Some(ti);
+                    sel[ti] = Some(ci);
+                }
+            }
+            // Pair exchanges on the total increment (unassigned = miss).
+            let kf = |ti: usize, c: Option<usize>| match c {
+                Some(c) => key.get(&(ti, c)).copied().unwrap_or(f64::INFINITY),
+                None => miss,
+            };
+            for _ in 0..cfg.swap_passes {
+                let mut changed = false;
+                for i in 0..sel.len() {
+                    for j in (i + 1)..sel.len() {
+                        let (a, b) = (sel[i], sel[j]);
+                        if a.is_none() && b.is_none() {
+                            continue;
+                        }
+                        let now = kf(i, a) + kf(j, b);
+                        let sw = kf(i, b) + kf(j, a);
+                        if sw.is_finite()
+                            && sw + (fishtrack_core::track::SWAP_MIN_GAIN as f64) < now
+                        {
+                            sel[i] = b;
+                            sel[j] = a;
+                            changed = true;
+                        }
+                    }
+                }
+                if !changed {
+                    break;
+                }
+            }
+            owner = vec![None; cands.len()];
+            for (ti, c) in sel.iter().enumerate() {
+                if let Some(c) = c {
+                    owner[*c] = Some(ti);
                 }
             }
         }
