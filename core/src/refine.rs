@@ -180,6 +180,20 @@ pub fn refine_disparity<const B: usize>(
 mod tests {
     use super::*;
 
+    /// A `w × h` textured left frame and its right view shifted by a
+    /// constant disparity `d`.
+    fn shifted_pair(w: usize, h: usize, d: i32) -> (Vec<u8>, Vec<u8>) {
+        let mut l = vec![0u8; w * h];
+        let mut r = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                l[y * w + x] = tex(x as i32, y as i32);
+                r[y * w + x] = tex(x as i32 + d, y as i32);
+            }
+        }
+        (l, r)
+    }
+
     fn tex(x: i32, y: i32) -> u8 {
         let h = (x.wrapping_mul(73856093) ^ y.wrapping_mul(19349663)) as u32;
         (40 + (h >> 7) % 150) as u8
@@ -214,15 +228,7 @@ mod tests {
     #[test]
     fn a_large_object_is_sampled_over_its_whole_height() {
         let (w, h) = (400usize, 200usize);
-        let d = 11i32;
-        let mut l = vec![0u8; w * h];
-        let mut r = vec![0u8; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                l[y * w + x] = tex(x as i32, y as i32);
-                r[y * w + x] = tex(x as i32 + d, y as i32);
-            }
-        }
+        let (l, r) = shifted_pair(w, h, 11);
         let lv = ImageView::packed(&l, w, h).unwrap();
         let rv = ImageView::packed(&r, w, h).unwrap();
         let runs: Vec<Run> = (0..200).map(|y| Run { y, x0: 40, x1: 400 }).collect();
@@ -242,14 +248,7 @@ mod tests {
     fn recovers_a_constant_shift() {
         let (w, h) = (160usize, 80usize);
         let d = 23i32;
-        let mut l = vec![0u8; w * h];
-        let mut r = vec![0u8; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                l[y * w + x] = tex(x as i32, y as i32);
-                r[y * w + x] = tex(x as i32 + d, y as i32);
-            }
-        }
+        let (l, r) = shifted_pair(w, h, d);
         let lv = ImageView::packed(&l, w, h).unwrap();
         let rv = ImageView::packed(&r, w, h).unwrap();
         let runs: Vec<Run> = (20..60).map(|y| Run { y, x0: 50, x1: 130 }).collect();

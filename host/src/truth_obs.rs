@@ -173,31 +173,8 @@ fn run_with<const T: usize, const D: usize, const K: usize, const H: usize, cons
     params: &Params,
     rows: &mut Vec<MotRow>,
 ) {
-    for of in &to.frames {
-        let mut sink = |e: &TrackEvent<'_>| {
-            if let TrackEvent::Frame { track, step } = e {
-                if let Some(o) = step.obs {
-                    let src = to
-                        .frames
-                        .iter()
-                        .find(|x| x.frame == step.frame)
-                        .and_then(|x| x.source.get(o as usize));
-                    if let Some(&(_, b)) = src {
-                        rows.push(MotRow {
-                            frame: step.frame,
-                            id: *track as i64,
-                            bbox: b,
-                            length_px: None,
-                            line: 0,
-                        });
-                    }
-                }
-            }
-        };
-        if tr.step(of.frame, &of.obs, params, &mut sink).is_err() {
-            return;
-        }
-    }
+    // one sink for the steps and the final flush: each committed track
+    // step with an observation becomes a row with that observation's box
     let mut sink = |e: &TrackEvent<'_>| {
         if let TrackEvent::Frame { track, step } = e {
             if let Some(o) = step.obs {
@@ -218,6 +195,11 @@ fn run_with<const T: usize, const D: usize, const K: usize, const H: usize, cons
             }
         }
     };
+    for of in &to.frames {
+        if tr.step(of.frame, &of.obs, params, &mut sink).is_err() {
+            return;
+        }
+    }
     tr.finish(&mut sink);
 }
 

@@ -10,9 +10,10 @@
 #![deny(missing_docs)]
 
 use std::collections::HashMap;
+use std::ffi::OsStr;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Mutex, OnceLock};
 
 /// Path where cargo puts a workspace binary for the profile of this test.
@@ -23,6 +24,30 @@ pub fn bin(name: &str) -> PathBuf {
         p.pop();
     }
     p.join(format!("{name}{}", std::env::consts::EXE_SUFFIX))
+}
+
+/// The up-to-date `fishtrack` binary.
+pub fn fishtrack() -> &'static Path {
+    built_bin("fishtrack", "fishtrack")
+}
+
+/// Runs `fishtrack` with `args` and captures its exit status and output;
+/// panics if it cannot be started.
+pub fn run_fishtrack<S: AsRef<OsStr>>(args: &[S]) -> Output {
+    Command::new(fishtrack())
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", fishtrack().display()))
+}
+
+/// Captured output as text (lossy UTF-8).
+pub fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// A test path as `&str` (the temporary paths the tests make are UTF-8).
+pub fn path_str(p: &Path) -> &str {
+    p.to_str().expect("test path is UTF-8")
 }
 
 /// Path of an up-to-date binary `name` of package `package`, built on first

@@ -10,29 +10,11 @@
 //! `host/src/params_file.rs`); these check the whole path through the CLI.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use fishtrack::calib::StereoCalib;
+use fishtrack_tests::{path_str as s, run_fishtrack as run, text};
 use image::{GrayImage, ImageBuffer, Luma, Rgb, RgbImage};
-
-fn fishtrack() -> &'static Path {
-    fishtrack_tests::built_bin("fishtrack", "fishtrack")
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(fishtrack())
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}", fishtrack().display()))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 /// A synthetic 256² haul of `frames` pairs in a fresh temporary directory.
 fn haul_with(frames: u32, extra: &[&str]) -> (tempfile::TempDir, PathBuf) {

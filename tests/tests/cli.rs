@@ -11,8 +11,7 @@
 //! stale binary, and fails with a clear message if the binary is still
 //! missing.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use fishtrack_tests::{run_fishtrack as run, text};
 
 /// The subcommands DESIGN.md promises.
 const SUBCOMMANDS: [&str; 7] = [
@@ -24,21 +23,6 @@ const SUBCOMMANDS: [&str; 7] = [
     "bench",
     "timing-check",
 ];
-
-fn fishtrack() -> &'static Path {
-    fishtrack_tests::built_bin("fishtrack", "fishtrack")
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(fishtrack())
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}", fishtrack().display()))
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 #[test]
 fn help_lists_the_design_subcommands() {
@@ -71,7 +55,7 @@ fn usage_errors_exit_2() {
     assert!(text(&out.stderr).contains("no-such-subcommand"));
     let out = run(&["track"]); // HAUL and --out are required
     assert_eq!(out.status.code(), Some(2));
-    let out = run(&[]);
+    let out = run::<&str>(&[]);
     assert_eq!(out.status.code(), Some(2));
 }
 

@@ -3,29 +3,11 @@
 //! SIGINT) that leave no file that looks complete but is not, with a rerun
 //! giving the same bytes as an uninterrupted run.
 
+use fishtrack_tests::{fishtrack, path_str as s, run_fishtrack as run, text};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-fn fishtrack() -> &'static Path {
-    fishtrack_tests::built_bin("fishtrack", "fishtrack")
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(fishtrack())
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}", fishtrack().display()))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 #[track_caller]
 fn ok(out: &Output) {

@@ -6,10 +6,11 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::OnceLock;
 
 use fishtrack::eval::io::{read_fish, read_mot, read_stereo};
+use fishtrack_tests::{run_fishtrack as run, text};
 
 const FRAMES: u32 = 15;
 const FILES: [&str; 6] = [
@@ -20,21 +21,6 @@ const FILES: [&str; 6] = [
     "stereo.csv",
     "summary.json",
 ];
-
-fn fishtrack() -> &'static Path {
-    fishtrack_tests::built_bin("fishtrack", "fishtrack")
-}
-
-fn run(args: &[&std::ffi::OsStr]) -> Output {
-    Command::new(fishtrack())
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}", fishtrack().display()))
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 fn os(s: &(impl AsRef<std::ffi::OsStr> + ?Sized)) -> &std::ffi::OsStr {
     s.as_ref()
