@@ -47,4 +47,5 @@ pub mod lowres;
 pub mod morph;
 pub mod noise;
 pub mod segment;
+pub mod smooth;
 pub mod threshold;

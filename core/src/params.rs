@@ -78,6 +78,14 @@ pub struct Params {
     /// paper; `crate::segment::local::elongated_enough`); 1 turns the test
     /// off. Default 2.
     pub min_elongation: f32,
+    /// Side of the box mean applied to a local region before its
+    /// thresholds and masks (eq. (1)–(3)) are computed (beyond the paper;
+    /// `crate::segment::local`): averaging `k × k` pixels divides the
+    /// sensor noise σ by `k`, so a fish a few grey levels above the water
+    /// thresholds as one body instead of salt-and-pepper. Object
+    /// statistics (mean, variance, histogram) still use the unsmoothed
+    /// pixels. Odd, 1 to 15; 1 is the paper (no smoothing). Default 5.
+    pub local_smooth: u8,
 
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
     /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
@@ -121,6 +129,7 @@ impl Default for Params {
             coarse_scale: 4,
             variance_literal: false,
             min_elongation: 2.0,
+            local_smooth: 5,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,
@@ -171,6 +180,9 @@ impl Params {
         if width < 1024 {
             self.mesh_line_len = odd_at_least_3(self.mesh_line_len as f32 * s * 2.0);
             self.disk_size = odd_at_least_3(self.disk_size as f32 * s * 2.0);
+            if self.local_smooth > 1 {
+                self.local_smooth = odd_at_least_3(self.local_smooth as f32 * s * 2.0);
+            }
         }
         self
     }
@@ -249,6 +261,11 @@ impl Params {
             "ellipse_scale",
             (1.0..=4.0).contains(&self.ellipse_scale),
             "1 ≤ ellipse_scale ≤ 4",
+        )?;
+        range(
+            "local_smooth",
+            self.local_smooth % 2 == 1 && (1..=15).contains(&self.local_smooth),
+            "odd, 1 to 15",
         )?;
         range(
             "coarse_scale",

@@ -1,6 +1,7 @@
 //! Diagnostic dump (development aid): per segmented object of every left
 //! frame, its raw box and features, as CSV on stdout.
-//! `seg_diag [--no-var] [--literal] HAUL...`
+//! `seg_diag [--no-var] [--literal] [--regions] HAUL...` (`--regions`: also
+//! one `R,…` row per local region: raw-left centre, semi-axes, angle, τ).
 use anyhow::Result;
 use fishtrack::detect::{detection_rows, load_calibration};
 use fishtrack::haul::Haul;
@@ -8,16 +9,18 @@ use fishtrack::rectify::Rectifier;
 use fishtrack_core::image::ImageView;
 use fishtrack_core::object::Objects;
 use fishtrack_core::params::Params;
-use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI_PIXELS};
+use fishtrack_core::segment::{segment_frame_traced, workspace_size, RECOMMENDED_MAX_ROI_PIXELS};
 
 fn main() -> Result<()> {
     let mut no_var = false;
     let mut literal = false;
+    let mut regions = false;
     let mut hauls = vec![];
     for a in std::env::args().skip(1) {
         match a.as_str() {
             "--no-var" => no_var = true,
             "--literal" => literal = true,
+            "--regions" => regions = true,
             _ => hauls.push(a),
         }
     }
@@ -36,8 +39,19 @@ fn main() -> Result<()> {
             let (left, _) = haul.load_pair(pair, Some((calib.width, calib.height)))?;
             let rl = rect.left_map.apply(&left)?;
             let view = ImageView::packed(rl.as_raw(), w, h).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let st =
-                segment_frame(view, &p, &mut ws, &mut objs).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let mut traces = Vec::new();
+            let st = segment_frame_traced(view, &p, &mut ws, &mut objs, &mut |t| traces.push(*t))
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            if regions {
+                for t in &traces {
+                    let r = &t.region;
+                    let (x, y) = rect.left.rect_to_raw(r.cx as f64, r.cy as f64);
+                    println!(
+                        "R,{hp},{},{x:.1},{y:.1},{:.1},{:.1},{:.3},{},{},{}",
+                        pair.index, r.a, r.b, r.angle, t.tau, t.t_low, t.t_high
+                    );
+                }
+            }
             let rows = detection_rows(pair.index, &objs, &rect.left);
             for (r, o) in rows.iter().zip(objs.items.iter()) {
                 println!(

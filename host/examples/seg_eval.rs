@@ -6,10 +6,12 @@
 //! ```text
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
-//!     [--full-res-coarse] [--var-min X] [--elong X] [--out DIR] HAUL...
+//!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
+//!     [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
-//! gradient with one global threshold, literal θ_V, no elongation test).
+//! gradient with one global threshold, literal θ_V, no elongation test, no
+//! local smoothing, no border exemption of the elongation test).
 //! ```
 
 use std::path::PathBuf;
@@ -24,6 +26,7 @@ fn main() -> Result<()> {
     let (mut single, mut no_bp, mut no_var, mut bins) = (false, false, false, None);
     let (mut paper, mut literal, mut scale1) = (false, false, false);
     let (mut var_min, mut elong): (Option<f32>, Option<f32>) = (None, None);
+    let mut smooth: Option<u8> = None;
     let mut out = std::env::temp_dir().join("seg_eval");
     let mut hauls = Vec::new();
     while let Some(a) = args.next() {
@@ -35,6 +38,7 @@ fn main() -> Result<()> {
             "--literal-var" => literal = true,
             "--full-res-coarse" => scale1 = true,
             "--var-min" => var_min = Some(args.next().context("--var-min X")?.parse()?),
+            "--smooth" => smooth = Some(args.next().context("--smooth K")?.parse()?),
             "--elong" => elong = Some(args.next().context("--elong X")?.parse()?),
             "--bins" => bins = Some(args.next().context("--bins N")?.parse::<u8>()?),
             "--out" => out = PathBuf::from(args.next().context("--out DIR")?),
@@ -61,6 +65,10 @@ fn main() -> Result<()> {
             // the paper's pipeline: no step beyond Section III
             (literal, scale1) = (true, true);
             p.min_elongation = 1.0;
+            p.local_smooth = 1;
+        }
+        if let Some(k) = smooth {
+            p.local_smooth = k;
         }
         p.variance_literal = literal;
         if scale1 {

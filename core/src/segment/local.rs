@@ -6,6 +6,12 @@
 //!   coarse component's centroid, pixel centres at integer coordinates;
 //!   its pixels are found per row as one span. Everything outside the
 //!   ellipse is background and takes no part in any histogram.
+//! - The thresholds and masks of eq. (1)–(3) see the region's pixels
+//!   box-averaged `local_smooth × local_smooth` ([`crate::smooth`]; beyond
+//!   the paper, 1 turns it off): the noise σ drops by the box side, so a
+//!   fish a few grey levels above the water thresholds as one body. The
+//!   objects' statistics (mean, variance, histogram) use the unsmoothed
+//!   pixels.
 //! - Otsu's τ on the ellipse's 256-bin histogram; τ_low, τ_high by eq. (1)
 //!   ([`crate::threshold::shifted_threshold`]); `M_x = {p > ⌊τ_x⌋}` (the
 //!   OpenCV/imageproc "foreground is p > t" convention).
@@ -26,7 +32,8 @@
 //!   border convention, then components again; eq. (4) is applied once
 //!   more so that fragments split off by the opening are not output, and
 //!   (beyond the paper) objects less elongated than `min_elongation` are
-//!   dropped ([`elongated_enough`]).
+//!   dropped ([`elongated_enough`]) unless the frame border cuts them
+//!   ([`cut_by_border`]).
 //!
 //! Memory bound: the ROI buffers of the workspace (8 bytes per ROI pixel),
 //! one span per ROI row, [`super::MAX_ROI_COMPONENTS`] statistics records;
@@ -40,6 +47,7 @@ use crate::label::{label_components, Moments};
 use crate::morph::{close_disk_in_place, median3_binary, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
+use crate::smooth::box_mean_roi;
 use crate::threshold::{lower_class_mean, otsu, shifted_threshold};
 
 /// Upper end of the backprojection histograms' grey-level range: this
@@ -88,6 +96,18 @@ pub fn elongated_enough(m: &Moments, e: f32) -> bool {
     }
     let (_, l1, l2) = m.principal_axes();
     l1 >= e * e * l2
+}
+
+/// Whether an object reaches within `margin / 4` pixels of the frame
+/// border (beyond the paper): such a fish is cut by the frame (or by the
+/// unmapped edge of the rectified frame), so its visible part need not be
+/// elongated, and [`elongated_enough`] is not applied to it.
+pub fn cut_by_border(m: &Moments, width: usize, height: usize, params: &Params) -> bool {
+    let e = params.margin / 4;
+    m.x_min <= e
+        || m.y_min <= e
+        || (m.x_max as usize).saturating_add(e as usize) >= width.saturating_sub(1)
+        || (m.y_max as usize).saturating_add(e as usize) >= height.saturating_sub(1)
 }
 
 /// Bounding box (clipped to the frame) of an ellipse.
@@ -190,12 +210,31 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     ellipse_spans(&reg, roi, spans);
     let pv = frame.sub(roi).map_err(SegmentError::Image)?;
     let inside = |sp: &[i32; 2], i: usize| (i as i32) >= sp[0] && (i as i32) < sp[1];
+    let a = bufs.a.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let b = bufs.b.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let c = bufs.c.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let d = bufs.d.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+
+    // --- the pixels the thresholds see: box mean (beyond the paper) into `d` ---
+    // (the column sums borrow the label buffer, unused until eq. (4))
+    let colsum: &mut [u32] = bytemuck::cast_slice_mut(&mut bufs.labels[..]);
+    if colsum.len() < rw + params.local_smooth as usize {
+        stats.regions_small += 1; // a one-row sliver: no fish fits
+        return Ok(());
+    }
+    box_mean_roi(frame, roi, params.local_smooth, colsum, d)
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    let labels = bufs
+        .labels
+        .get_mut(..n)
+        .ok_or(SegmentError::WorkspaceTooSmall)?;
+    let sv = view(d, rw, rh)?;
 
     // --- double local thresholding, eq. (1) ---
     let mut h256 = [0u32; 256];
     let mut total = 0u64;
     for (j, sp) in spans.iter().enumerate() {
-        let row = pv.row(j);
+        let row = sv.row(j);
         for &p in row.get(sp[0] as usize..sp[1] as usize).unwrap_or(&[]) {
             h256[p as usize] += 1;
             total += 1;
@@ -227,16 +266,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         t_low,
         t_high,
     });
-    let a = bufs.a.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
-    let b = bufs.b.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
-    let c = bufs.c.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
-    let d = bufs.d.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
-    let labels = bufs
-        .labels
-        .get_mut(..n)
-        .ok_or(SegmentError::WorkspaceTooSmall)?;
     for (j, sp) in spans.iter().enumerate() {
-        let row = pv.row(j);
+        let row = sv.row(j);
         let (ra, rb) = (&mut a[j * rw..(j + 1) * rw], &mut b[j * rw..(j + 1) * rw]);
         for (i, &p) in row.iter().enumerate().take(rw) {
             let ins = inside(sp, i);
@@ -244,27 +275,28 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             rb[i] = if ins && p > t_high { 255 } else { 0 };
         }
     }
-    // 3 × 3 median on both masks, restricted to the ellipse again
+    // 3 × 3 median on both masks (M_low into `c`, M_high into `a`),
+    // restricted to the ellipse again
     median3_binary(view(a, rw, rh)?, c).map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    median3_binary(view(b, rw, rh)?, d).map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    median3_binary(view(b, rw, rh)?, a).map_err(|_| SegmentError::WorkspaceTooSmall)?;
     for (j, sp) in spans.iter().enumerate() {
         for i in 0..rw {
             if !inside(sp, i) {
                 c[j * rw + i] = 0;
-                d[j * rw + i] = 0;
+                a[j * rw + i] = 0;
             }
         }
     }
 
-    // --- histogram backprojection, eq. (2)–(3): B into `a` ---
+    // --- histogram backprojection, eq. (2)–(3): B into `b` ---
     if params.double_threshold && params.backprojection {
         let (mut hl, mut hh) = ([0u32; 256], [0u32; 256]);
         for j in 0..rh {
-            let row = pv.row(j);
+            let row = sv.row(j);
             for (i, &p) in row.iter().enumerate().take(rw) {
                 let k = j * rw + i;
                 hl[p as usize] += (c[k] != 0) as u32;
-                hh[p as usize] += (d[k] != 0) as u32;
+                hh[p as usize] += (a[k] != 0) as u32;
             }
         }
         let bins = (params.hist_bins as usize).clamp(1, 256);
@@ -275,9 +307,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         fold_bins_range(&hh, lo, hi, &mut bh[..bins]);
         let lut = ratio_backprojection_lut_range(&bh[..bins], &bl[..bins], lo, hi, params.theta_bp);
         for (j, sp) in spans.iter().enumerate() {
-            let row = pv.row(j);
+            let row = sv.row(j);
             for (i, &p) in row.iter().enumerate().take(rw) {
-                a[j * rw + i] = if inside(sp, i) && lut[p as usize] {
+                b[j * rw + i] = if inside(sp, i) && lut[p as usize] {
                     255
                 } else {
                     0
@@ -285,13 +317,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             }
         }
     } else {
-        a.copy_from_slice(d);
+        b.copy_from_slice(a);
     }
 
-    // --- area and variance rejection, eq. (4)–(6): accepted mask into `b` ---
+    // --- area and variance rejection, eq. (4)–(6): accepted mask into `a` ---
     let (amin, amax) = (params.area_min, params.area_max);
     let mut rej_area = 0u32;
-    let n1 = label_components(view(a, rw, rh)?, labels, |ar| {
+    let n1 = label_components(view(b, rw, rh)?, labels, |ar| {
         let ok = ar >= amin && ar <= amax;
         rej_area += !ok as u32;
         ok
@@ -333,7 +365,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         rec[STAT_WORDS - 1] = ok as u64;
     }
     let mut any = false;
-    for (bv, &l) in b.iter_mut().zip(labels.iter()) {
+    for (bv, &l) in a.iter_mut().zip(labels.iter()) {
         let keep = l > 0
             && (l as usize) <= n1s
             && recs
@@ -348,13 +380,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
 
     // --- post-processing, Section III.D: closing then opening ---
     let disk = Disk::opencv_ellipse(params.disk_size);
-    close_disk_in_place(b, rw, rh, &disk, c, disk_scratch)
+    close_disk_in_place(a, rw, rh, &disk, c, disk_scratch)
         .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    open_disk_in_place(b, rw, rh, &disk, c, disk_scratch)
+    open_disk_in_place(a, rw, rh, &disk, c, disk_scratch)
         .map_err(|_| SegmentError::WorkspaceTooSmall)?;
 
     // --- final components and their statistics ---
-    let n2 = label_components(view(b, rw, rh)?, labels, |ar| ar >= amin && ar <= amax)
+    let n2 = label_components(view(a, rw, rh)?, labels, |ar| ar >= amin && ar <= amax)
         .map_err(|_| SegmentError::WorkspaceTooSmall)?;
     let n2s = (n2 as usize).min(cap);
     stats.label_overflow += n2 - n2s as u32;
@@ -396,7 +428,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             *hv = r as u32;
         }
         let m = Moments::from_words(&rec[..10]);
-        if !elongated_enough(&m, params.min_elongation) {
+        if !elongated_enough(&m, params.min_elongation) && !cut_by_border(&m, fw, fh, params) {
             stats.rejected_shape += 1;
             continue;
         }

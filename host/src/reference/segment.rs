@@ -141,6 +141,28 @@ pub fn gradient(img: &GrayImage, disk: &Mask) -> GrayImage {
     g
 }
 
+/// `k × k` box mean with replicated border, halves rounded up (core:
+/// `smooth::box_mean_roi`); `k = 1` is the image itself.
+pub fn box_mean(img: &GrayImage, k: u32) -> GrayImage {
+    if k <= 1 {
+        return img.clone();
+    }
+    let (w, h) = img.dimensions();
+    let r = (k / 2) as i64;
+    let d = (k * k) as f64;
+    GrayImage::from_fn(w, h, |x, y| {
+        let mut s = 0u32;
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let xx = (x as i64 + dx).clamp(0, w as i64 - 1) as u32;
+                let yy = (y as i64 + dy).clamp(0, h as i64 - 1) as u32;
+                s += img.get_pixel(xx, yy).0[0] as u32;
+            }
+        }
+        Luma([(s as f64 / d + 0.5).floor() as u8])
+    })
+}
+
 /// Lower median of values (the ⌈n/2⌉-th smallest).
 fn lower_median(v: &mut [u32]) -> u32 {
     if v.is_empty() {
@@ -463,6 +485,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
             .collect()
     };
     let (amin, amax) = (p.area_min as usize, p.area_max as usize);
+    let smoothed = box_mean(&filtered, p.local_smooth as u32);
     for &[cx, cy, ca, cb, cc] in &coarse {
         let (angle, l1, l2) = pca_of(ca, cb, cc);
         let s = p.ellipse_scale as f64;
@@ -500,7 +523,8 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         let ins: Vec<bool> = (0..rw * rh)
             .map(|i| inside(x0 + i % rw, y0 + i / rw))
             .collect();
-        let at = |i: u32| filtered.get_pixel(x0 + i % rw, y0 + i / rw).0[0];
+        // the pixels the thresholds see (core: `local_smooth`)
+        let at = |i: u32| smoothed.get_pixel(x0 + i % rw, y0 + i / rw).0[0];
         let vals: Vec<u8> = (0..rw * rh).filter(|&i| ins[i as usize]).map(at).collect();
         if vals.is_empty() || vals.len() < amin {
             continue;
@@ -614,7 +638,13 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
             // elongation test (core: `local::elongated_enough`)
             let e = p.min_elongation as f64;
             let (_, _, _, l1, l2) = pca(&comp);
-            if e > 1.0 && l1 < e * e * l2 {
+            // (core: `local::cut_by_border` exempts fish cut by the frame)
+            let m = p.margin / 4;
+            let cut = comp.iter().any(|&(x, y)| {
+                let (fx, fy) = (x + x0, y + y0);
+                fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
+            });
+            if e > 1.0 && l1 < e * e * l2 && !cut {
                 continue;
             }
             let (mean, variance) = mean_var(&roi_img, &comp);
