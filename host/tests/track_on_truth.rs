@@ -46,7 +46,9 @@ fn success(hauls: &[TruthObs], assoc: Assoc, cues: Cues) -> (u64, u64) {
     (c, n)
 }
 
-/// Diagnostic overrides: FISHTRACK_TT="miss gate sv sv0 minsamp birth maxlost".
+/// Diagnostic overrides: FISHTRACK_TT="miss gate sv sv0 minsamp birth maxlost
+/// [cap share σ_a σ_m σ_h σ_d lost_gate swap_passes area_robust hist_robust]"
+/// (defaults: `24 48 250 350 32 2 1 inf 24 0.25 0.5 1 0.04 6 4 inf inf`).
 fn tweak(cfg: &mut TrackConfig) {
     let Ok(v) = std::env::var("FISHTRACK_TT") else {
         return;
@@ -84,6 +86,12 @@ fn tweak(cfg: &mut TrackConfig) {
     }
     if let Some(&c) = f.get(14) {
         cfg.swap_passes = c as u8;
+    }
+    if let Some(&c) = f.get(15) {
+        cfg.area_robust = c;
+    }
+    if let Some(&c) = f.get(16) {
+        cfg.hist_robust = c;
     }
 }
 
@@ -329,16 +337,14 @@ fn print_failures() {
 }
 
 /// Prints every closed track of haul seed `FISHTRACK_SEED` (reason, path
-/// as frame:fish) — for diagnosing failures.
+/// as frame:fish; `FISHTRACK_THIN` for 2.5 fps) — for diagnosing failures.
 #[test]
 #[ignore = "diagnostic: needs FISHTRACK_TRACK_HAULS and FISHTRACK_SEED"]
 fn print_closed_tracks() {
     use fishtrack_core::track::{DefaultTracker, TrackEvent};
     let seed: u64 = std::env::var("FISHTRACK_SEED").unwrap().parse().unwrap();
-    for to in hauls_from_env(false)
-        .iter()
-        .filter(|h| h.truth.seed == seed)
-    {
+    let thin = std::env::var("FISHTRACK_THIN").is_ok();
+    for to in hauls_from_env(thin).iter().filter(|h| h.truth.seed == seed) {
         let p = Params::for_frame(to.truth.width);
         let mut cfg = TrackConfig::for_frame(to.truth.width, to.truth.height);
         tweak(&mut cfg);

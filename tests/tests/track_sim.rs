@@ -357,6 +357,10 @@ type Claims = Vec<(usize, u32, u16)>;
 fn run_core(h: &Haul, assoc: Assoc, cues: Cues) -> Claims {
     let mut cfg = TrackConfig::for_frame(W, W);
     cfg.cues = cues;
+    run_core_cfg(h, assoc, cfg)
+}
+
+fn run_core_cfg(h: &Haul, assoc: Assoc, cfg: TrackConfig) -> Claims {
     let mut tr: DefaultTracker = Tracker::new(cfg).unwrap();
     let p = Params {
         tracker: assoc,
@@ -572,8 +576,54 @@ fn core_and_reference_assign_identically() {
     println!("core vs reference: identical assignments over {total} claimed observations");
 }
 
+/// The soft bounds on the appearance terms (`area_robust`,
+/// `hist_robust`; off by default) change assignments identically in core
+/// and reference; prints their Table V figures (README, tracking).
+#[test]
+fn robust_appearance_core_and_reference_agree() {
+    let mut cfg = TrackConfig::for_frame(W, W);
+    cfg.area_robust = 9.0;
+    cfg.hist_robust = 12.0;
+    let mut differ_from_default = 0usize;
+    for seed in 0..4 {
+        let h = simulate(seed, 80);
+        let p = Params {
+            tracker: Assoc::Viterbi,
+            ..Params::for_frame(W)
+        };
+        let r = reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
+        let core = run_core_full_cfg(&h, Assoc::Viterbi, cfg);
+        let rep = reference::track::compare(&core, &r);
+        assert!(rep.identical(), "seed {seed}: {rep:?}");
+        let plain = run_core_full(&h, Assoc::Viterbi);
+        differ_from_default += reference::track::compare(&core, &plain).differing;
+    }
+    // The bounds are not a no-op on these hauls.
+    assert!(differ_from_default > 0);
+    for (label, thinned) in [("5 fps", false), ("2.5 fps", true)] {
+        let mut sr = Vec::new();
+        for seed in 0..SEEDS {
+            let h0 = simulate(seed, FRAMES);
+            let h = if thinned { thin(&h0) } else { h0 };
+            sr.push(success(&h, &run_core_cfg(&h, Assoc::Viterbi, cfg)).0);
+        }
+        println!(
+            "soft-bounded appearance (area 9, histogram 12), {label}: viterbi {:.3}",
+            mean(&sr)
+        );
+    }
+}
+
 fn run_core_full(h: &Haul, assoc: Assoc) -> Vec<reference::track::Assignment> {
-    let mut tr: DefaultTracker = Tracker::new(TrackConfig::for_frame(W, W)).unwrap();
+    run_core_full_cfg(h, assoc, TrackConfig::for_frame(W, W))
+}
+
+fn run_core_full_cfg(
+    h: &Haul,
+    assoc: Assoc,
+    cfg: TrackConfig,
+) -> Vec<reference::track::Assignment> {
+    let mut tr: DefaultTracker = Tracker::new(cfg).unwrap();
     let p = Params {
         tracker: assoc,
         ..Params::for_frame(W)

@@ -246,28 +246,66 @@ pub fn edge_features(
     }
 }
 
+/// Robust forms of the matching cost's terms (our addition, see
+/// [`camera_cost`]). `NONE` is eq. (9) as published.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Robust {
+    /// Cap on every term z (`TrackConfig::cue_cap`).
+    pub cap: f32,
+    /// Scale c of the area term's soft bound ρ(z) = c·ln(1 + z/c)
+    /// (`TrackConfig::area_robust`); ∞ = z.
+    pub area: f32,
+    /// Scale c of the histogram term's soft bound
+    /// (`TrackConfig::hist_robust`); ∞ = z.
+    pub hist: f32,
+}
+
+impl Robust {
+    /// Eq. (9) as published: no cap, no soft bound.
+    pub const NONE: Robust = Robust {
+        cap: f32::INFINITY,
+        area: f32::INFINITY,
+        hist: f32::INFINITY,
+    };
+}
+
+/// Soft bound ρ(z) = c·ln(1 + z/c) of a cue term: ≈ z for z ≪ c, growing
+/// only logarithmically beyond (the negative log-likelihood of a
+/// heavy-tailed, Cauchy-like feature); `z` itself when c is ∞.
+pub fn soft_bound(z: f32, c: f32) -> f32 {
+    if c.is_finite() && c > 0.0 {
+        c * libm::log1pf(z / c)
+    } else {
+        z
+    }
+}
+
 /// One camera's matching cost c_ij, eq. (9), from squared features.
 /// `first` selects σ_v0 for a node whose velocity is not yet known.
 ///
-/// **Robust form (our addition):** each cue's term z is capped at `cap`
+/// **Robust forms (our addition):** each cue's term z is capped at `r.cap`
 /// (`TrackConfig::cue_cap`; default ∞, see there): at 5 fps single cues are
 /// heavy-tailed (a fish turns, bends, or is cut by the border), and one
-/// outlying cue must not veto a link the other cues support. With
-/// `cap = ∞` this is eq. (9) exactly.
-pub fn camera_cost(f: &EdgeFeatures, s: &Sigmas, first: bool, cues: Cues, cap: f32) -> f32 {
+/// outlying cue must not veto a link the other cues support. The
+/// appearance terms (area, histogram) can instead be softly bounded,
+/// [`soft_bound`] with `r.area` / `r.hist` (default ∞). With
+/// [`Robust::NONE`] this is eq. (9) exactly.
+pub fn camera_cost(f: &EdgeFeatures, s: &Sigmas, first: bool, cues: Cues, r: &Robust) -> f32 {
     let mut c = 0.0;
+    let cap = r.cap;
     let t = |z: f32| if z < cap { z } else { cap };
     if cues.has(Cues::VICINITY) {
         c += t(f.d2 / if first { s.v0 } else { s.v });
     }
     if cues.has(Cues::AREA) {
-        c += t(f.a2 / s.a);
+        c += t(soft_bound(f.a2 / s.a, r.area));
     }
     if cues.has(Cues::DIRECTION) {
         c += t(f.m2 / s.m);
     }
     if cues.has(Cues::HISTOGRAM) {
-        c += t(f.h2 / s.h);
+        c += t(soft_bound(f.h2 / s.h, r.hist));
     }
     if cues.has(Cues::DEPTH) {
         c += t(f.z2 / s.d);
@@ -323,15 +361,33 @@ mod tests {
             h: 1.0,
             d: 1.0,
         };
-        assert_eq!(camera_cost(&f, &s, false, Cues::ALL, f32::INFINITY), 15.0);
-        assert_eq!(camera_cost(&f, &s, true, Cues::ALL, f32::INFINITY), 14.25);
+        assert_eq!(camera_cost(&f, &s, false, Cues::ALL, &Robust::NONE), 15.0);
+        assert_eq!(camera_cost(&f, &s, true, Cues::ALL, &Robust::NONE), 14.25);
         assert_eq!(
-            camera_cost(&f, &s, false, Cues::without(Cues::HISTOGRAM), f32::INFINITY),
+            camera_cost(&f, &s, false, Cues::without(Cues::HISTOGRAM), &Robust::NONE),
             6.0
         );
-        assert_eq!(camera_cost(&f, &s, false, Cues(0), f32::INFINITY), 0.0);
+        assert_eq!(camera_cost(&f, &s, false, Cues(0), &Robust::NONE), 0.0);
         // Capped: 1 + 1 + 3 + 3 (z_v = 1, z_a = 1, z_m = 4 → 3, z_h = 9 → 3).
-        assert_eq!(camera_cost(&f, &s, false, Cues::ALL, 3.0), 8.0);
+        let capped = Robust {
+            cap: 3.0,
+            ..Robust::NONE
+        };
+        assert_eq!(camera_cost(&f, &s, false, Cues::ALL, &capped), 8.0);
+        // Soft bounds on area and histogram: 1 + 4·ln(1 + 1/4) + 4 +
+        // 4·ln(1 + 9/4) instead of 1 + 1 + 4 + 9.
+        let soft = Robust {
+            area: 4.0,
+            hist: 4.0,
+            ..Robust::NONE
+        };
+        let want = 1.0 + 4.0 * (1.25f64).ln() + 4.0 + 4.0 * (3.25f64).ln();
+        let got = camera_cost(&f, &s, false, Cues::ALL, &soft) as f64;
+        assert!((got - want).abs() < 1e-5, "{got} {want}");
+        // ρ(z) ≤ z, ≈ z for small z, and ρ = z with c = ∞.
+        assert_eq!(soft_bound(7.0, f32::INFINITY), 7.0);
+        assert!((soft_bound(0.01, 9.0) - 0.01).abs() < 1e-5);
+        assert!(soft_bound(100.0, 9.0) < 23.0);
     }
 
     #[test]

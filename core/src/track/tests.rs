@@ -230,6 +230,18 @@ fn config_and_frame_order_errors() {
     let mut c = TrackConfig::for_frame(W, W);
     c.max_lost = 15;
     assert!(matches!(DefaultTracker::new(c), Err(TrackError::Config(_))));
+    for v in [0.0, -1.0, f32::NAN] {
+        let mut c = TrackConfig::for_frame(W, W);
+        c.area_robust = v;
+        assert!(matches!(DefaultTracker::new(c), Err(TrackError::Config(_))));
+        let mut c = TrackConfig::for_frame(W, W);
+        c.hist_robust = v;
+        assert!(matches!(DefaultTracker::new(c), Err(TrackError::Config(_))));
+    }
+    let mut c = TrackConfig::for_frame(W, W);
+    c.area_robust = 9.0;
+    c.hist_robust = f32::INFINITY;
+    assert!(DefaultTracker::new(c).is_ok());
     assert!(matches!(
         Tracker::<4, 1, 4, 4, 4>::new(TrackConfig::for_frame(W, W)),
         Err(TrackError::Config(_))

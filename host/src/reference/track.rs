@@ -3,8 +3,9 @@
 //! vectors, as the yardstick for "identical track assignments".
 //!
 //! What must match the core exactly (the rules, not the code): cue
-//! definitions and σ estimation (last 128 chosen-edge samples per cue,
-//! median rank ⌊n/2⌋ / 0.4549, clamped to [default, 16·default], after
+//! definitions (with the `cue_cap` cap and the `area_robust` /
+//! `hist_robust` soft bounds c·ln(1 + z/c)) and σ estimation (last 128
+//! chosen-edge samples per cue, median rank ⌊n/2⌋ / 0.4549, clamped to [default, 16·default], after
 //! `min_sigma_samples`); the candidate gate; K − 1 cheapest real nodes plus
 //! one predicted node per stage; commit of the oldest stage along the best
 //! path with pruning at depth D; the joint selection of each frame's best
@@ -198,6 +199,9 @@ struct Costs {
     v_init: [f64; 2],
     z_ref: f64,
     cap: f64,
+    /// Soft-bound scales of the area and histogram terms (∞ = none).
+    area_c: f64,
+    hist_c: f64,
 }
 
 struct Feat {
@@ -270,13 +274,23 @@ fn feat(
     }
 }
 
+/// Soft bound c·ln(1 + z/c) of an appearance term; z when c is ∞.
+fn soft(z: f64, c: f64) -> f64 {
+    if c.is_finite() {
+        c * (z / c).ln_1p()
+    } else {
+        z
+    }
+}
+
 fn cam_cost(f: &Feat, k: &Costs, first: bool) -> f64 {
-    // Each cue's term capped at cue_cap (robust eq. 9).
+    // Each cue's term capped at cue_cap (robust eq. 9); area and histogram
+    // terms softly bounded by area_robust / hist_robust.
     let terms = [
         (1, f.d2 / if first { k.s[1] } else { k.s[0] }),
-        (2, f.a2 / k.s[2]),
+        (2, soft(f.a2 / k.s[2], k.area_c)),
         (4, f.m2 / k.s[3]),
-        (8, f.h2 / k.s[4]),
+        (8, soft(f.h2 / k.s[4], k.hist_c)),
         (16, f.z2 / k.s[5]),
     ];
     terms
@@ -398,6 +412,8 @@ pub fn run(
             v_init,
             z_ref: cfg.z_ref_mm as f64,
             cap: cfg.cue_cap as f64,
+            area_c: cfg.area_robust as f64,
+            hist_c: cfg.hist_robust as f64,
         };
         let mut taken = vec![false; obs.len()];
 
