@@ -252,15 +252,17 @@ pub fn label_components(
         let row = mask.row(y);
         let mut x = 0;
         while x < w {
-            if row.get(x).copied().unwrap_or(0) == 0 {
-                labels[y * w + x] = 0;
-                x += 1;
-                continue;
+            // background: skipped 16 pixels at a time, labels zeroed in one fill
+            let z = next_where(row, x, w, true);
+            if let Some(l) = labels.get_mut(y * w + x..y * w + z) {
+                l.fill(0);
+            }
+            x = z;
+            if x >= w {
+                break;
             }
             let x0 = x;
-            while x < w && row.get(x).copied().unwrap_or(0) != 0 {
-                x += 1;
-            }
+            x = next_where(row, x, w, false);
             let p0 = y * w + x0;
             labels[p0] = -((x - x0) as i32);
             for l in &mut labels[p0 + 1..y * w + x] {
@@ -281,25 +283,62 @@ pub fn label_components(
             }
         }
     }
-    // pass 2: raster order; a parent is always an earlier, already final pixel
+    // pass 2: raster order; a parent is always an earlier, already final
+    // pixel. Background is skipped a whole group of 16 labels at a time.
     let mut next = 0u32;
-    for i in 0..n {
-        let v = labels[i];
-        if v == 0 {
+    let mut g0 = 0usize;
+    while g0 < n {
+        let g1 = (g0 + 16).min(n);
+        if labels
+            .get(g0..g1)
+            .is_some_and(|g| g.iter().fold(0, |a, &v| a | v) == 0)
+        {
+            g0 = g1;
             continue;
         }
-        labels[i] = if v < 0 {
-            if keep(v.unsigned_abs()) {
-                next += 1;
-                next as i32
-            } else {
-                0
+        for i in g0..g1 {
+            let v = labels[i];
+            if v == 0 {
+                continue;
             }
-        } else {
-            labels.get((v - 1) as usize).copied().unwrap_or(0)
-        };
+            labels[i] = if v < 0 {
+                if keep(v.unsigned_abs()) {
+                    next += 1;
+                    next as i32
+                } else {
+                    0
+                }
+            } else {
+                labels.get((v - 1) as usize).copied().unwrap_or(0)
+            };
+        }
+        g0 = g1;
     }
     Ok(next)
+}
+
+/// First column `≥ x` (below `w`) whose pixel is nonzero (`nonzero` true)
+/// or zero (`nonzero` false); `w` when there is none. Uniform stretches are
+/// skipped 16 pixels per step.
+fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
+    let w = w.min(row.len());
+    let fill = if nonzero { 0u128 } else { u128::MAX };
+    while x < w {
+        if let Some(c) = row.get(x..x + 16) {
+            let v: u128 = bytemuck::pod_read_unaligned(c);
+            // a 0/255 mask: the whole chunk is background (or foreground)
+            if v == fill || (!nonzero && !c.contains(&0)) {
+                x += 16;
+                continue;
+            }
+        }
+        let p = row.get(x).copied().unwrap_or(0);
+        if (p != 0) == nonzero {
+            return x;
+        }
+        x += 1;
+    }
+    w
 }
 
 // ------------------------------------------------------------------------
@@ -831,7 +870,7 @@ mod tests {
         // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
         #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
         #[test]
-        fn label_components_equals_flood_fill(w in 1usize..40, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
+        fn label_components_equals_flood_fill(w in 1usize..100, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
             let mask = random_mask(w, h, seed, density);
             let (fl, n) = flood(&mask, w, h);
             let areas = {
