@@ -280,10 +280,12 @@ pub fn median_mad_u16(values: &[u16], hist: &mut [u32], dev: &mut [u32]) -> (u32
     let (hist, dev) = (&mut hist[..bins], &mut dev[..bins]);
     hist.fill(0);
     dev.fill(0);
+    // (counts cannot wrap: fewer than 2³² values reach one bin for any
+    // frame a u16 run can describe)
+    let last = bins - 1;
     for &v in values {
-        if let Some(c) = hist.get_mut((v as usize).min(bins - 1)) {
-            *c = c.saturating_add(1);
-        }
+        let c = &mut hist[(v as usize).min(last)];
+        *c = c.wrapping_add(1);
     }
     let med = hist_median(hist);
     for (i, &c) in hist.iter().enumerate() {

@@ -698,21 +698,44 @@ fn line_stage<const MAX: bool>(
 ) {
     let k = 2 * half + 1;
     let w = pw - 2 * half;
-    let mut srcs: [&[u8]; 2 * (MAX_SE / 2) + 1] = [&[]; 2 * (MAX_SE / 2) + 1];
-    for (i, s) in srcs.iter_mut().take(k).enumerate() {
-        // offset kk = i − half: row y + kk, column x ± kk
-        let yy = (y + i).checked_sub(half).filter(|&yy| yy < h);
-        let row = match yy {
-            Some(yy) => ring.get((yy % k) * pw..(yy % k + 1) * pw).unwrap_or(&[]),
-            None => identity,
+    // input i (offset kk = i − half): row y + kk, column x ± kk
+    // slot of row y − half (rows y − half ..= y + half are consecutive slots)
+    let base = (y + k - half % k) % k;
+    let input = |i: usize| -> &[u8] {
+        let inside = (y + i).checked_sub(half).is_some_and(|yy| yy < h);
+        let sl = if base + i >= k {
+            base + i - k
+        } else {
+            base + i
+        };
+        let row = if inside {
+            ring.get(sl * pw..(sl + 1) * pw).unwrap_or(&[])
+        } else {
+            identity
         };
         let start = match dir {
             Diagonal::Main => i,
             Diagonal::Anti => 2 * half - i,
         };
-        *s = row.get(start..start + w).unwrap_or(&[]);
+        row.get(start..start + w).unwrap_or(&[])
+    };
+    let dst = match dst.get_mut(..w) {
+        Some(d) => d,
+        None => return,
+    };
+    // the usual lengths straight into the kernel of their input count
+    match k {
+        3 => reduce_k::<MAX, 3>(dst, &core::array::from_fn(input)),
+        5 => reduce_k::<MAX, 5>(dst, &core::array::from_fn(input)),
+        7 => reduce_k::<MAX, 7>(dst, &core::array::from_fn(input)),
+        _ => {
+            let mut srcs: [&[u8]; 2 * (MAX_SE / 2) + 1] = [&[]; 2 * (MAX_SE / 2) + 1];
+            for (i, s) in srcs.iter_mut().take(k).enumerate() {
+                *s = input(i);
+            }
+            reduce::<MAX>(dst, &srcs[..k]);
+        }
     }
-    reduce::<MAX>(dst, &srcs[..k]);
 }
 
 /// Grey morphological gradient `dilate − erode` by `disk` (Section III.A,
