@@ -272,36 +272,39 @@ pub fn label_components(
                 let lo = x0.saturating_sub(1);
                 let hi = x.min(w - 1); // inclusive: x is the pixel right of the run
                 let prev = (y - 1) * w;
-                let mut in_run = false;
-                for xx in lo..=hi {
-                    let fg = labels[prev + xx] != 0;
-                    if fg && !in_run {
-                        union(labels, p0, prev + xx);
+                // one union per run of the previous row touching [lo, hi]
+                // (its first pixel there), found on the previous mask row
+                // (foreground there ⇔ nonzero label after pass 1)
+                let prow = mask.row(y - 1);
+                let mut xx = lo;
+                while xx <= hi {
+                    xx = next_where(prow, xx, hi + 1, true);
+                    if xx > hi {
+                        break;
                     }
-                    in_run = fg;
+                    union(labels, p0, prev + xx);
+                    xx = next_where(prow, xx, hi + 1, false);
                 }
             }
         }
     }
     // pass 2: raster order; a parent is always an earlier, already final
-    // pixel. Background is skipped a whole group of 16 labels at a time.
+    // pixel. Only run starts can be roots and a run is one component, so
+    // each run's first pixel is resolved and the rest of the run filled
+    // with its label (background is already 0 from pass 1).
     let mut next = 0u32;
-    let mut g0 = 0usize;
-    while g0 < n {
-        let g1 = (g0 + 16).min(n);
-        if labels
-            .get(g0..g1)
-            .is_some_and(|g| g.iter().fold(0, |a, &v| a | v) == 0)
-        {
-            g0 = g1;
-            continue;
-        }
-        for i in g0..g1 {
-            let v = labels[i];
-            if v == 0 {
-                continue;
+    for y in 0..h {
+        let row = mask.row(y);
+        let mut x = 0;
+        while x < w {
+            x = next_where(row, x, w, true);
+            if x >= w {
+                break;
             }
-            labels[i] = if v < 0 {
+            let x1 = next_where(row, x, w, false);
+            let i = y * w + x;
+            let v = labels[i];
+            let l = if v < 0 {
                 if keep(v.unsigned_abs()) {
                     next += 1;
                     next as i32
@@ -311,8 +314,11 @@ pub fn label_components(
             } else {
                 labels.get((v - 1) as usize).copied().unwrap_or(0)
             };
+            if let Some(run) = labels.get_mut(i..y * w + x1) {
+                run.fill(l);
+            }
+            x = x1;
         }
-        g0 = g1;
     }
     Ok(next)
 }
@@ -320,18 +326,26 @@ pub fn label_components(
 /// First column `≥ x` (below `w`) whose pixel is nonzero (`nonzero` true)
 /// or zero (`nonzero` false); `w` when there is none. Uniform stretches are
 /// skipped 16 pixels per step.
+#[inline]
 fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
     let w = w.min(row.len());
-    let fill = if nonzero { 0u128 } else { u128::MAX };
-    while x < w {
-        if let Some(c) = row.get(x..x + 16) {
-            let v: u128 = bytemuck::pod_read_unaligned(c);
-            // a 0/255 mask: the whole chunk is background (or foreground)
-            if v == fill || (!nonzero && !c.contains(&0)) {
-                x += 16;
-                continue;
-            }
+    const ONES: u128 = u128::MAX / 255; // 0x0101…01
+    while x + 16 <= w {
+        let Some(c) = row.get(x..x + 16) else { break };
+        let v: u128 = bytemuck::pod_read_unaligned(c);
+        // skip the chunk when it holds no pixel of the kind sought:
+        // all zero, or no zero byte (the classic SWAR zero-byte test)
+        let skip = if nonzero {
+            v == 0
+        } else {
+            v.wrapping_sub(ONES) & !v & (ONES << 7) == 0
+        };
+        if !skip {
+            break;
         }
+        x += 16;
+    }
+    while x < w {
         let p = row.get(x).copied().unwrap_or(0);
         if (p != 0) == nonzero {
             return x;
