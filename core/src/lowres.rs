@@ -15,10 +15,11 @@
 //! - [`median_mad_u16`]: median and median absolute deviation of a `u16`
 //!   image's values clamped to a histogram of caller-chosen length.
 //!
-//! Integer arithmetic only; no allocation; the caller provides every
-//! buffer. The gradient is the naive windowed max − min: on a frame
-//! downsampled 4× (512 × 512 for 2048²) it costs about 2 · 21 operations
-//! per low-resolution pixel, under 1/10 of the full-resolution gradient.
+//! Integer arithmetic only; no allocation (stack chunks of a few KiB); the
+//! caller provides every buffer. Both full-frame loops are slice-wise and
+//! vectorise: the downsample is about one instruction per source pixel, the
+//! gradient (decomposed by row half-width, see [`gradient_disk_u16`]) a
+//! few per low-resolution pixel (README "Performance").
 
 use crate::image::ImageView;
 use crate::morph::Disk;
@@ -50,9 +51,17 @@ pub const fn low_size(width: usize, height: usize, f: usize) -> (usize, usize) {
     (width.div_ceil(f), height.div_ceil(f))
 }
 
+/// Output columns per chunk of [`box_mean16`] and [`gradient_disk_u16`]
+/// (stack buffers; no allocation).
+const CHUNK: usize = 256;
+
 /// Downsamples `src` by `f` into the packed `dst` (`⌈w/f⌉ × ⌈h/f⌉`):
 /// each output pixel is `round(16 · Σ/count)` over its `f × f` block
 /// (rounding half up, exact in integers). Returns the output size.
+///
+/// Cost: per output row the `f` source rows are summed column-wise into a
+/// `u32` chunk (one vectorised add per source pixel), then each block's
+/// `f` column sums are added and scaled once per output pixel.
 pub fn box_mean16(
     src: ImageView<'_>,
     f: usize,
@@ -64,42 +73,105 @@ pub fn box_mean16(
     let (w, h) = (src.width(), src.height());
     let (lw, lh) = low_size(w, h, f);
     let dst = dst.get_mut(..lw * lh).ok_or(LowResError::DstTooSmall)?;
-    // per output row: accumulate block sums in u32 (≤ 255 · f² per block)
+    // source columns per chunk: a whole number of blocks (f ≤ CHUNK), or
+    // one block per chunk for larger factors
+    let span = if f <= CHUNK { (CHUNK / f) * f } else { f };
+    let mut cols = [0u16; CHUNK];
     for (ly, drow) in dst.chunks_exact_mut(lw.max(1)).enumerate().take(lh) {
         let y0 = ly * f;
         let y1 = (y0 + f).min(h);
-        let mut sums = [0u32; 64];
-        let mut bx = 0usize;
-        // process the row in chunks of up to 64 output pixels (no alloc)
-        while bx < lw {
-            let n = (lw - bx).min(sums.len());
-            sums[..n].fill(0);
-            for y in y0..y1 {
-                let row = src.row(y);
-                for (k, s) in sums.iter_mut().enumerate().take(n) {
-                    let x0 = (bx + k) * f;
-                    let x1 = (x0 + f).min(w);
-                    let part = row.get(x0..x1).unwrap_or(&[]);
-                    *s += part.iter().map(|&p| p as u32).sum::<u32>();
+        let rows = (y1 - y0) as u64;
+        let mut x0 = 0usize;
+        while x0 < w {
+            let x1 = (x0 + span).min(w);
+            if f <= CHUNK {
+                // column sums ≤ 255 · f ≤ 65280 fit a u16
+                let cols = &mut cols[..x1 - x0];
+                column_sums(src, y0, y1, x0, cols);
+                let out = drow.get_mut(x0 / f..).unwrap_or(&mut []);
+                if f == 4 && rows == 4 {
+                    // the default: (16 s + 8) / 16 = s, s ≤ 4080
+                    for (o, blk) in out.iter_mut().zip(cols.chunks_exact(4)) {
+                        *o = blk[0] + blk[1] + blk[2] + blk[3];
+                    }
+                    let tail = cols.chunks_exact(4).remainder();
+                    if !tail.is_empty() {
+                        if let Some(o) = out.get_mut(cols.len() / 4) {
+                            let s: u32 = tail.iter().map(|&c| c as u32).sum();
+                            *o = mean16(s as u64, tail.len() as u64 * rows);
+                        }
+                    }
+                } else {
+                    for (o, blk) in out.iter_mut().zip(cols.chunks(f)) {
+                        let s: u32 = blk.iter().map(|&c| c as u32).sum();
+                        *o = mean16(s as u64, blk.len() as u64 * rows);
+                    }
+                }
+            } else {
+                // one block wider than a chunk: sum it row by row
+                let mut s = 0u64;
+                for y in y0..y1 {
+                    let part = src.row(y).get(x0..x1).unwrap_or(&[]);
+                    s += part.iter().map(|&p| p as u64).sum::<u64>();
+                }
+                if let Some(d) = drow.get_mut(x0 / f) {
+                    *d = mean16(s, (x1 - x0) as u64 * rows);
                 }
             }
-            for (k, &s) in sums.iter().enumerate().take(n) {
-                let x0 = (bx + k) * f;
-                let count = ((x0 + f).min(w) - x0) as u64 * (y1 - y0) as u64;
-                let v = (16 * s as u64 + count / 2).checked_div(count).unwrap_or(0);
-                if let Some(d) = drow.get_mut(bx + k) {
-                    *d = v.min(u16::MAX as u64) as u16;
-                }
-            }
-            bx += n;
+            x0 = x1;
         }
     }
     Ok((lw, lh))
 }
 
+/// `cols[i] = Σ_{y0 ≤ y < y1} src(x0 + i, y)`, four rows per pass (each
+/// pass a handful of vector instructions per 16 columns). Sums must fit a
+/// `u16` (`y1 − y0 ≤ 257`).
+fn column_sums(src: ImageView<'_>, y0: usize, y1: usize, x0: usize, cols: &mut [u16]) {
+    let x1 = x0 + cols.len();
+    cols.fill(0);
+    let part = |y: usize| src.row(y).get(x0..x1).unwrap_or(&[]);
+    let mut y = y0;
+    while y + 4 <= y1 {
+        let (a, b, c, d) = (part(y), part(y + 1), part(y + 2), part(y + 3));
+        for ((((s, &a), &b), &c), &d) in cols.iter_mut().zip(a).zip(b).zip(c).zip(d) {
+            *s += (a as u16 + b as u16) + (c as u16 + d as u16);
+        }
+        y += 4;
+    }
+    while y < y1 {
+        for (s, &a) in cols.iter_mut().zip(part(y)) {
+            *s += a as u16;
+        }
+        y += 1;
+    }
+}
+
+/// `round(16 · s / count)` rounding half up, saturated to `u16`; 0 for an
+/// empty block.
+#[inline]
+fn mean16(s: u64, count: u64) -> u16 {
+    let v = if count == 16 {
+        // the default 4 × 4 block: (16 s + 8) / 16 = s
+        s
+    } else {
+        (16 * s + count / 2).checked_div(count).unwrap_or(0)
+    };
+    v.min(u16::MAX as u64) as u16
+}
+
 /// Grey morphological gradient of the packed `u16` image `src`
 /// (`width × height`) by `disk` into `dst`: per pixel the maximum minus
 /// the minimum over the element's pixels that lie inside the image.
+///
+/// Decomposed by half-width: the element is the union over its distinct
+/// row half-widths `t` of (rows with half-width ≥ `t`) × `[−t, t]`, so the
+/// rows are merged into one vertical extremum in order of decreasing
+/// half-width and, after each distinct `t`, that extremum's horizontal
+/// window `[−t, t]` is merged into the output. For the 5 × 5 disk that is
+/// 11 maxima (and 11 minima) per pixel instead of 21, all slice-wise over
+/// chunks of [`CHUNK`] columns padded with the identity outside the image
+/// (which is how outside pixels are ignored).
 pub fn gradient_disk_u16(
     src: &[u16],
     width: usize,
@@ -112,27 +184,71 @@ pub fn gradient_disk_u16(
         (Some(s), Some(d)) => (s, d),
         _ => return Err(LowResError::DstTooSmall),
     };
-    let r = disk.radius as isize;
-    for y in 0..height as isize {
-        for x in 0..width as isize {
-            let (mut mx, mut mn) = (0u16, u16::MAX);
-            for dy in -r..=r {
-                let yy = y + dy;
-                if yy < 0 || yy >= height as isize {
+    const R: usize = crate::morph::MAX_SE / 2;
+    let r = disk.radius.min(R);
+    // half-width of row dy (clamped to r: the element spans −r..=r)
+    let hw = |dy: isize| disk.half_width(dy).min(r);
+    let mut vmax = [0u16; CHUNK + 2 * R];
+    let mut vmin = [u16::MAX; CHUNK + 2 * R];
+    let mut amax = [0u16; CHUNK];
+    let mut amin = [u16::MAX; CHUNK];
+    for (y, drow) in dst.chunks_exact_mut(width.max(1)).enumerate().take(height) {
+        let mut x0 = 0usize;
+        while x0 < width {
+            let x1 = (x0 + CHUNK).min(width);
+            let m = x1 - x0;
+            // v[i] holds column x0 − r + i, i in 0..m + 2r
+            let (vmax, vmin) = (&mut vmax[..m + 2 * r], &mut vmin[..m + 2 * r]);
+            vmax.fill(0);
+            vmin.fill(u16::MAX);
+            let (amax, amin) = (&mut amax[..m], &mut amin[..m]);
+            amax.fill(0);
+            amin.fill(u16::MAX);
+            // columns of the chunk's padded span that lie inside the image
+            let ca = x0.saturating_sub(r);
+            let cb = (x1 + r).min(width);
+            let off = ca + r - x0; // index in v of column ca
+            for t in (0..=r).rev() {
+                let mut added = false;
+                for dy in -(r as isize)..=(r as isize) {
+                    let yy = y as isize + dy;
+                    if hw(dy) != t || yy < 0 || yy >= height as isize {
+                        continue;
+                    }
+                    let s = yy as usize * width;
+                    if let (Some(row), Some(vx), Some(vn)) = (
+                        src.get(s + ca..s + cb),
+                        vmax.get_mut(off..off + (cb - ca)),
+                        vmin.get_mut(off..off + (cb - ca)),
+                    ) {
+                        for ((a, b), &p) in vx.iter_mut().zip(vn.iter_mut()).zip(row) {
+                            *a = (*a).max(p);
+                            *b = (*b).min(p);
+                        }
+                        added = true;
+                    }
+                }
+                if !added {
                     continue;
                 }
-                let hw = disk.half_width(dy) as isize;
-                let xa = (x - hw).max(0) as usize;
-                let xb = ((x + hw + 1).min(width as isize)).max(0) as usize;
-                let row = yy as usize * width;
-                for &v in src.get(row + xa..row + xb.max(xa)).unwrap_or(&[]) {
-                    mx = mx.max(v);
-                    mn = mn.min(v);
+                // output i covers v[i + r − t ..= i + r + t]
+                for k in r - t..=r + t {
+                    if let (Some(vx), Some(vn)) = (vmax.get(k..k + m), vmin.get(k..k + m)) {
+                        for (((a, b), &p), &q) in
+                            amax.iter_mut().zip(amin.iter_mut()).zip(vx).zip(vn)
+                        {
+                            *a = (*a).max(p);
+                            *b = (*b).min(q);
+                        }
+                    }
                 }
             }
-            if let Some(d) = dst.get_mut(y as usize * width + x as usize) {
-                *d = mx.saturating_sub(mn);
+            if let Some(d) = drow.get_mut(x0..x1) {
+                for ((o, &a), &b) in d.iter_mut().zip(amax.iter()).zip(amin.iter()) {
+                    *o = a.saturating_sub(b);
+                }
             }
+            x0 = x1;
         }
     }
     Ok(())
@@ -164,10 +280,12 @@ pub fn median_mad_u16(values: &[u16], hist: &mut [u32], dev: &mut [u32]) -> (u32
     let (hist, dev) = (&mut hist[..bins], &mut dev[..bins]);
     hist.fill(0);
     dev.fill(0);
+    // (counts cannot wrap: fewer than 2³² values reach one bin for any
+    // frame a u16 run can describe)
+    let last = bins - 1;
     for &v in values {
-        if let Some(c) = hist.get_mut((v as usize).min(bins - 1)) {
-            *c = c.saturating_add(1);
-        }
+        let c = &mut hist[(v as usize).min(last)];
+        *c = c.wrapping_add(1);
     }
     let med = hist_median(hist);
     for (i, &c) in hist.iter().enumerate() {
@@ -249,6 +367,36 @@ mod tests {
             let mut s = seed | 1;
             let img: Vec<u16> = (0..w * h).map(|_| {
                 s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 52) as u16
+            }).collect();
+            let disk = Disk::opencv_ellipse(2 * size + 1);
+            let mut out = vec![0u16; w * h];
+            prop_assert_eq!(gradient_disk_u16(&img, w, h, &disk, &mut out), Ok(()));
+            prop_assert_eq!(out, naive_gradient(&img, w, h, &disk));
+        }
+
+        /// Across several column chunks, and factors above the chunk.
+        #[test]
+        fn wide_mean16_equals_naive(w in 200usize..700, h in 1usize..6,
+                                    f in prop::sample::select(vec![1usize, 3, 4, 5, 16, 300]),
+                                    seed in any::<u64>()) {
+            let mut s = seed | 1;
+            let img: Vec<u8> = (0..w * h).map(|_| {
+                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 24) as u8
+            }).collect();
+            let v = ImageView::packed(&img, w, h).unwrap();
+            let (lw, lh) = low_size(w, h, f);
+            let mut out = vec![0u16; lw * lh];
+            prop_assert_eq!(box_mean16(v, f, &mut out), Ok((lw, lh)));
+            prop_assert_eq!(out, naive_mean16(&img, w, h, f));
+        }
+
+        /// Across several column chunks, with disks up to 9 × 9.
+        #[test]
+        fn wide_gradient_equals_naive(w in 200usize..600, h in 1usize..10, size in 0u8..5,
+                                      seed in any::<u64>()) {
+            let mut s = seed | 1;
+            let img: Vec<u16> = (0..w * h).map(|_| {
+                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 48) as u16
             }).collect();
             let disk = Disk::opencv_ellipse(2 * size + 1);
             let mut out = vec![0u16; w * h];

@@ -157,11 +157,11 @@ const MAX_INPUTS: usize = 2 * MAX_SE + 1;
 const BLOCK: usize = 32;
 
 /// `out[i] = op over k of srcs[k][i]` (identity when `srcs` is empty), in
-/// one pass reading up to eight input rows: fewer than eight are padded
-/// with repeats of the first (min and max are idempotent), more are folded
-/// in by further passes. Blocks of [`BLOCK`] bytes with every slice cut to
-/// the same length carry no bounds checks and unroll into a handful of
-/// vector min/max instructions per block (one load per input, one store).
+/// one pass reading up to eight input rows (the kernel is instantiated for
+/// each count 1..=8, so no input is read twice); more are folded in by
+/// further passes. Blocks of [`BLOCK`] bytes with every slice cut to the
+/// same length carry no bounds checks and unroll into a handful of vector
+/// min/max instructions per block (one load per input, one store).
 fn reduce<const MAX: bool>(out: &mut [u8], srcs: &[&[u8]]) {
     let n = srcs.iter().fold(out.len(), |n, s| n.min(s.len()));
     let out = &mut out[..n];
@@ -169,13 +169,27 @@ fn reduce<const MAX: bool>(out: &mut [u8], srcs: &[&[u8]]) {
         out.fill(identity::<MAX>());
         return;
     };
-    let mut eight = [first; 8];
-    for (e, &s) in eight.iter_mut().zip(srcs) {
-        *e = s;
+    fn arr<'a, const K: usize>(srcs: &[&'a [u8]], first: &'a [u8]) -> [&'a [u8]; K] {
+        let mut a = [first; K];
+        for (e, &s) in a.iter_mut().zip(srcs) {
+            *e = s;
+        }
+        a
     }
-    reduce8::<MAX>(out, &eight);
-    for &s in srcs.iter().skip(8) {
-        combine::<MAX>(out, s);
+    match srcs.len() {
+        1 => out.copy_from_slice(&first[..n]),
+        2 => reduce_k::<MAX, 2>(out, &arr(srcs, first)),
+        3 => reduce_k::<MAX, 3>(out, &arr(srcs, first)),
+        4 => reduce_k::<MAX, 4>(out, &arr(srcs, first)),
+        5 => reduce_k::<MAX, 5>(out, &arr(srcs, first)),
+        6 => reduce_k::<MAX, 6>(out, &arr(srcs, first)),
+        7 => reduce_k::<MAX, 7>(out, &arr(srcs, first)),
+        _ => {
+            reduce_k::<MAX, 8>(out, &arr(srcs, first));
+            for &s in srcs.iter().skip(8) {
+                combine::<MAX>(out, s);
+            }
+        }
     }
 }
 
@@ -184,60 +198,28 @@ fn blocks(s: &[u8], m: usize) -> &[[u8; BLOCK]] {
     bytemuck::cast_slice(s.get(..m).unwrap_or(&[]))
 }
 
-/// `out[i] = op of the eight rows at i` (all at least `out.len()` long).
-fn reduce8<const MAX: bool>(out: &mut [u8], r: &[&[u8]; 8]) {
+/// `out[i] = op of the K rows at i` (all at least `out.len()` long).
+fn reduce_k<const MAX: bool, const K: usize>(out: &mut [u8], r: &[&[u8]; K]) {
     let n = out.len();
     let m = n - n % BLOCK;
     let (ob, ot) = out.split_at_mut(m);
     let ob: &mut [[u8; BLOCK]] = bytemuck::cast_slice_mut(ob);
     let k = ob.len();
-    let (a, b, c, d) = (
-        blocks(r[0], m),
-        blocks(r[1], m),
-        blocks(r[2], m),
-        blocks(r[3], m),
-    );
-    let (e, f, g, h) = (
-        blocks(r[4], m),
-        blocks(r[5], m),
-        blocks(r[6], m),
-        blocks(r[7], m),
-    );
-    if [
-        a.len(),
-        b.len(),
-        c.len(),
-        d.len(),
-        e.len(),
-        f.len(),
-        g.len(),
-        h.len(),
-    ]
-    .iter()
-    .any(|&l| l != k)
-    {
+    let bl: [&[[u8; BLOCK]]; K] = core::array::from_fn(|j| blocks(r[j], m));
+    if K == 0 || bl.iter().any(|b| b.len() < k) {
         return;
     }
-    let (a, b, c, d, e, f, g, h) = (
-        &a[..k],
-        &b[..k],
-        &c[..k],
-        &d[..k],
-        &e[..k],
-        &f[..k],
-        &g[..k],
-        &h[..k],
-    );
+    // every input cut to exactly k blocks: the loop below has no checks
+    let bl: [&[[u8; BLOCK]]; K] = core::array::from_fn(|j| &bl[j][..k]);
     for i in 0..k {
-        let (o, a, b, c, d) = (&mut ob[i], &a[i], &b[i], &c[i], &d[i]);
-        let (e, f, g, h) = (&e[i], &f[i], &g[i], &h[i]);
-        for j in 0..BLOCK {
-            let ab = op::<MAX>(a[j], b[j]);
-            let cd = op::<MAX>(c[j], d[j]);
-            let ef = op::<MAX>(e[j], f[j]);
-            let gh = op::<MAX>(g[j], h[j]);
-            o[j] = op::<MAX>(op::<MAX>(ab, cd), op::<MAX>(ef, gh));
+        let mut acc = bl[0][i];
+        for b in &bl[1..] {
+            let v = &b[i];
+            for j in 0..BLOCK {
+                acc[j] = op::<MAX>(acc[j], v[j]);
+            }
         }
+        ob[i] = acc;
     }
     if ot.is_empty() {
         return;
@@ -250,8 +232,8 @@ fn reduce8<const MAX: bool>(out: &mut [u8], r: &[&[u8]; 8]) {
                 .and_then(|b| b.try_into().ok())
                 .unwrap_or([identity::<MAX>(); BLOCK])
         };
-        let mut acc = at(r[0]);
-        for s in &r[1..] {
+        let mut acc = [identity::<MAX>(); BLOCK];
+        for s in r {
             let b = at(s);
             for j in 0..BLOCK {
                 acc[j] = op::<MAX>(acc[j], b[j]);
@@ -588,6 +570,9 @@ pub fn remove_mesh(
     if out.len() < w * h || tmp.len() < w * h {
         return Err(MorphError::DstTooSmall);
     }
+    if len >= 3 && tmp.len() >= mesh_scratch_len(w, len) {
+        return remove_mesh_fused(src, len, tmp, out);
+    }
     open_line(src, len, Diagonal::Main, tmp, out)?;
     line_op::<false>(
         ImageView::packed(&out[..w * h], w, h).map_err(|_| MorphError::DstTooSmall)?,
@@ -601,6 +586,156 @@ pub fn remove_mesh(
         Diagonal::Anti,
         out,
     )
+}
+
+/// Scratch bytes of [`remove_mesh_fused`] for rows of `width` pixels and
+/// lines of `len` pixels: four rings of `2·(len/2) + 1` rows of
+/// `width + 2·(len/2)` bytes, plus two identity rows.
+pub const fn mesh_scratch_len(width: usize, len: usize) -> usize {
+    let half = if len / 2 < MAX_SE / 2 {
+        len / 2
+    } else {
+        MAX_SE / 2
+    };
+    (4 * (2 * half + 1) + 2) * (width + 2 * half)
+}
+
+/// [`remove_mesh`] in one streaming pass over the frame (identical
+/// output): the four line operators (erosion and dilation along the main
+/// diagonal, then along the anti-diagonal) are chained through rings of
+/// `len` rows each, so every intermediate row is made once, read `len`
+/// times while it is in cache, and the frame is read once and written
+/// once. Ring rows carry `len/2` bytes of padding on each side holding the
+/// identity of the operator that reads them (255 before an erosion, 0
+/// before a dilation), and rows outside the image are an identity row: the
+/// OpenCV border convention (outside pixels ignored) without a border
+/// case, every output row one [`reduce`] of `len` shifted slices. Lines
+/// of fewer than 3 pixels are the identity, copied. `scratch` needs
+/// [`mesh_scratch_len`] bytes.
+pub fn remove_mesh_fused(
+    src: ImageView<'_>,
+    len: usize,
+    scratch: &mut [u8],
+    out: &mut [u8],
+) -> Result<(), MorphError> {
+    let (w, h) = (src.width(), src.height());
+    let half = (len / 2).min(MAX_SE / 2);
+    if out.len() < w * h {
+        return Err(MorphError::DstTooSmall);
+    }
+    if half == 0 {
+        for (y, o) in out.chunks_exact_mut(w.max(1)).take(h).enumerate() {
+            o.copy_from_slice(src.row(y));
+        }
+        return Ok(());
+    }
+    let k = 2 * half + 1;
+    let pw = w + 2 * half;
+    let scratch = scratch
+        .get_mut(..mesh_scratch_len(w, len))
+        .ok_or(MorphError::ScratchTooSmall)?;
+    let (r0, rest) = scratch.split_at_mut(k * pw);
+    let (r1, rest) = rest.split_at_mut(k * pw);
+    let (r2, rest) = rest.split_at_mut(k * pw);
+    let (r3, rest) = rest.split_at_mut(k * pw);
+    let (id_min, id_max) = rest.split_at_mut(pw);
+    // padding: the identity of each ring's reader (r0, r2 feed erosions)
+    r0.fill(255);
+    r2.fill(255);
+    id_min.fill(255);
+    r1.fill(0);
+    r3.fill(0);
+    id_max.fill(0);
+    let (id_min, id_max) = (&*id_min, &*id_max);
+    let slot = |y: usize| (y % k) * pw;
+    // stage s (1..=4) makes its row t − s·half at step t, after stage s − 1
+    // made the row it needs last (t − (s − 1)·half = its row + half)
+    for t in 0..h + 4 * half {
+        if t < h {
+            let s0 = slot(t) + half;
+            if let Some(d) = r0.get_mut(s0..s0 + w) {
+                d.copy_from_slice(src.row(t));
+            }
+        }
+        let row_of = |s: usize| (t + half).checked_sub(s * half + half).filter(|&y| y < h);
+        if let Some(y) = row_of(1) {
+            let s1 = slot(y) + half;
+            let dst = r1.get_mut(s1..s1 + w).unwrap_or(&mut []);
+            line_stage::<false>(r0, id_min, y, h, half, pw, Diagonal::Main, dst);
+        }
+        if let Some(y) = row_of(2) {
+            let s2 = slot(y) + half;
+            let dst = r2.get_mut(s2..s2 + w).unwrap_or(&mut []);
+            line_stage::<true>(r1, id_max, y, h, half, pw, Diagonal::Main, dst);
+        }
+        if let Some(y) = row_of(3) {
+            let s3 = slot(y) + half;
+            let dst = r3.get_mut(s3..s3 + w).unwrap_or(&mut []);
+            line_stage::<false>(r2, id_min, y, h, half, pw, Diagonal::Anti, dst);
+        }
+        if let Some(y) = row_of(4) {
+            let dst = out.get_mut(y * w..(y + 1) * w).unwrap_or(&mut []);
+            line_stage::<true>(r3, id_max, y, h, half, pw, Diagonal::Anti, dst);
+        }
+    }
+    Ok(())
+}
+
+/// Row `y` of a diagonal line operator whose input rows are the padded
+/// rows of `ring` (`2·half + 1` slots of `pw` bytes, row `yy` in slot
+/// `yy mod (2·half + 1)`), `identity` standing in for rows outside
+/// `0..h`; the output (`pw − 2·half` bytes) goes to `dst`.
+#[allow(clippy::too_many_arguments)]
+fn line_stage<const MAX: bool>(
+    ring: &[u8],
+    identity: &[u8],
+    y: usize,
+    h: usize,
+    half: usize,
+    pw: usize,
+    dir: Diagonal,
+    dst: &mut [u8],
+) {
+    let k = 2 * half + 1;
+    let w = pw - 2 * half;
+    // input i (offset kk = i − half): row y + kk, column x ± kk
+    // slot of row y − half (rows y − half ..= y + half are consecutive slots)
+    let base = (y + k - half % k) % k;
+    let input = |i: usize| -> &[u8] {
+        let inside = (y + i).checked_sub(half).is_some_and(|yy| yy < h);
+        let sl = if base + i >= k {
+            base + i - k
+        } else {
+            base + i
+        };
+        let row = if inside {
+            ring.get(sl * pw..(sl + 1) * pw).unwrap_or(&[])
+        } else {
+            identity
+        };
+        let start = match dir {
+            Diagonal::Main => i,
+            Diagonal::Anti => 2 * half - i,
+        };
+        row.get(start..start + w).unwrap_or(&[])
+    };
+    let dst = match dst.get_mut(..w) {
+        Some(d) => d,
+        None => return,
+    };
+    // the usual lengths straight into the kernel of their input count
+    match k {
+        3 => reduce_k::<MAX, 3>(dst, &core::array::from_fn(input)),
+        5 => reduce_k::<MAX, 5>(dst, &core::array::from_fn(input)),
+        7 => reduce_k::<MAX, 7>(dst, &core::array::from_fn(input)),
+        _ => {
+            let mut srcs: [&[u8]; 2 * (MAX_SE / 2) + 1] = [&[]; 2 * (MAX_SE / 2) + 1];
+            for (i, s) in srcs.iter_mut().take(k).enumerate() {
+                *s = input(i);
+            }
+            reduce::<MAX>(dst, &srcs[..k]);
+        }
+    }
 }
 
 /// Grey morphological gradient `dilate − erode` by `disk` (Section III.A,
@@ -853,6 +988,29 @@ mod tests {
                     }
                     prop_assert_eq!(out[y * w + x], if n >= 5 { 255 } else { 0 }, "({}, {})", x, y);
                 }
+            }
+        }
+
+        /// The fused streaming mesh removal equals the naive composition
+        /// of the four line operators, with the exact scratch size.
+        #[test]
+        fn fused_mesh_removal_equals_naive(w in 1usize..80, h in 1usize..40, len in prop::sample::select(vec![1usize, 3, 5, 7, 9]), seed in any::<u64>()) {
+            let mut s = seed;
+            let img: Vec<u8> = (0..w * h).map(|_| { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 }).collect();
+            let v = ImageView::packed(&img, w, h).unwrap();
+            let hl = (len / 2) as isize;
+            let main = |dx: isize, dy: isize| dx == dy;
+            let anti = |dx: isize, dy: isize| dx == -dy;
+            let e1 = naive::<false>(&img, w, h, &main, hl);
+            let o1 = naive::<true>(&e1, w, h, &main, hl);
+            let e2 = naive::<false>(&o1, w, h, &anti, hl);
+            let want = naive::<true>(&e2, w, h, &anti, hl);
+            let mut scratch = vec![7u8; mesh_scratch_len(w, len)];
+            let mut out = vec![0u8; w * h];
+            remove_mesh_fused(v, len, &mut scratch, &mut out).unwrap();
+            prop_assert_eq!(&out, &want);
+            if len >= 3 {
+                prop_assert!(remove_mesh_fused(v, len, &mut scratch[..mesh_scratch_len(w, len) - 1], &mut out).is_err());
             }
         }
 

@@ -4,10 +4,13 @@
 //! of each run's mean per pair, on the haul's frames (`--frames N`: the first N pairs):
 //! - `read`, `rectify`: decoding both files, remapping both frames (host;
 //!   both sides in parallel), per pair;
-//! - `mesh_removal` (Section V.A), `coarse` (7 × 7 gradient, global
-//!   threshold, streaming labels; Section III.A): the core's primitives
-//!   ([`fishtrack_core::morph`], [`fishtrack_core::label`]) run on both
-//!   rectified frames of a pair exactly as `segment::coarse` runs them;
+//! - `mesh_removal` (Section V.A), `coarse` (Section III.A as configured:
+//!   by default the 4 × 4 box mean, its 5 × 5 gradient, the median/MAD
+//!   hysteresis and the labels; at `coarse_scale` 1 the 7 × 7 gradient,
+//!   global threshold and streaming labels; plus the frame's noise
+//!   estimate): the core's primitives ([`fishtrack_core::morph`],
+//!   [`fishtrack_core::lowres`], [`fishtrack_core::label`]) run on both
+//!   rectified frames of a pair as `segment::coarse` runs them;
 //! - `segmentation`: both frames' [`Stage::SegmentLeft`] +
 //!   [`Stage::SegmentRight`] inside the pipeline, and `local_segmentation`
 //!   = segmentation − mesh removal − coarse (the per-region work, III.A–D);
@@ -29,10 +32,11 @@ use anyhow::Result;
 use serde_json::{json, Value};
 
 use fishtrack_core::hist::add_row_256;
-use fishtrack_core::label::{StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use fishtrack_core::label::{label_components, StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use fishtrack_core::lowres::{box_mean16, gradient_disk_u16, low_size, median_mad_u16};
 use fishtrack_core::morph::{disk_scratch_len, gradient_disk, remove_mesh, Disk};
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent, Stage};
-use fishtrack_core::segment::coarse::gradient_threshold;
+use fishtrack_core::segment::coarse::{gradient_threshold, hysteresis_thresholds, COARSE_LOW_DISK};
 use fishtrack_core::ImageView;
 
 use crate::error::InputError;
@@ -145,6 +149,10 @@ struct CoarseBufs {
     free: Vec<u32>,
     prev: Vec<[u32; RUN_WORDS]>,
     cur: Vec<[u32; RUN_WORDS]>,
+    low: Vec<u16>,
+    low_grad: Vec<u16>,
+    low_labels: Vec<i32>,
+    low_mask: Vec<u8>,
 }
 
 impl CoarseBufs {
@@ -158,6 +166,10 @@ impl CoarseBufs {
             free: vec![0; t],
             prev: vec![[0; RUN_WORDS]; r],
             cur: vec![[0; RUN_WORDS]; r],
+            low: Vec::new(),
+            low_grad: Vec::new(),
+            low_labels: Vec::new(),
+            low_mask: Vec::new(),
         }
     }
 
@@ -178,6 +190,16 @@ impl CoarseBufs {
         }
         let mesh = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
+        std::hint::black_box(fishtrack_core::noise::noise_sigma16(img));
+        let mut comps = 0usize;
+        if p.coarse_scale > 1 {
+            // the mesh-free frame, lent out while the other buffers are used
+            let filtered = std::mem::take(&mut self.filtered);
+            let fv = ImageView::packed(&filtered, w, h).map_err(|e| err(&e))?;
+            let r = self.low_res(fv, setup);
+            self.filtered = filtered;
+            return Ok((mesh, t1.elapsed().as_secs_f64(), r?));
+        }
         let disk = Disk::opencv_ellipse(p.disk_size);
         let fv = ImageView::packed(&self.filtered, w, h).map_err(|e| err(&e))?;
         gradient_disk(fv, &disk, &mut self.grad, &mut self.disk).map_err(|e| err(&e))?;
@@ -194,12 +216,67 @@ impl CoarseBufs {
             &mut self.cur,
         )
         .map_err(|e| err(&e))?;
-        let mut comps = 0usize;
         for row in self.grad.chunks_exact(w).take(h) {
             labeler.push_row_above(row, t, |_| comps += 1);
         }
         labeler.finish(|_| comps += 1);
         Ok((mesh, t1.elapsed().as_secs_f64(), comps))
+    }
+}
+
+impl CoarseBufs {
+    /// The reduced-resolution coarse pass as `segment::coarse` runs it
+    /// (downsample, 5 × 5 gradient, median/MAD hysteresis, labels, the
+    /// kept components' moments); returns the kept components.
+    fn low_res(&mut self, fv: ImageView<'_>, setup: &Setup) -> Result<usize> {
+        let err = |e: &dyn std::fmt::Debug| anyhow::anyhow!("bench coarse pass: {e:?}");
+        let f = setup.params.coarse_scale as usize;
+        let (lw, lh) = low_size(fv.width(), fv.height(), f);
+        let nl = lw * lh;
+        self.low.resize(nl, 0);
+        self.low_grad.resize(nl, 0);
+        self.low_labels.resize(nl, 0);
+        self.low_mask.resize(nl, 0);
+        box_mean16(fv, f, &mut self.low).map_err(|e| err(&e))?;
+        let disk = Disk::opencv_ellipse(COARSE_LOW_DISK);
+        gradient_disk_u16(&self.low, lw, lh, &disk, &mut self.low_grad).map_err(|e| err(&e))?;
+        // the core's 1024-bin median/MAD histograms
+        let (mut hist, mut dev) = (vec![0u32; 1024], vec![0u32; 1024]);
+        let (med, mad) = median_mad_u16(&self.low_grad, &mut hist, &mut dev);
+        let (t_low, t_high) = hysteresis_thresholds(med, mad);
+        for (m, &g) in self.low_mask.iter_mut().zip(&self.low_grad) {
+            *m = if g > t_low { 255 } else { 0 };
+        }
+        let min_low = ((setup.params.area_min / 4).max(1) as usize).div_ceil(f * f) as u32;
+        let mv = ImageView::packed(&self.low_mask, lw, lh).map_err(|e| err(&e))?;
+        let n =
+            label_components(mv, &mut self.low_labels, |a| a >= min_low).map_err(|e| err(&e))?;
+        let mut seeded = vec![false; n as usize];
+        for (&l, &g) in self.low_labels.iter().zip(&self.low_grad) {
+            if l > 0 && g > t_high {
+                if let Some(s) = seeded.get_mut(l as usize - 1) {
+                    *s = true;
+                }
+            }
+        }
+        for (m, &l) in self.low_mask.iter_mut().zip(&self.low_labels) {
+            let keep = l > 0 && seeded.get(l as usize - 1).copied().unwrap_or(false);
+            *m = if keep { 255 } else { 0 };
+        }
+        let mut labeler = StreamLabeler::new(
+            lw,
+            &mut self.slots,
+            &mut self.free,
+            &mut self.prev,
+            &mut self.cur,
+        )
+        .map_err(|e| err(&e))?;
+        let mut comps = 0usize;
+        for row in self.low_mask.chunks_exact(lw.max(1)).take(lh) {
+            labeler.push_row_above(row, 0, |_| comps += 1);
+        }
+        labeler.finish(|_| comps += 1);
+        Ok(comps)
     }
 }
 
