@@ -49,6 +49,10 @@ pub struct SnakeParams {
     pub reach: u8,
     /// Fraction of the background-to-body contrast that sets the tail level τ.
     pub level_fraction: f32,
+    /// When the fin's own contrast just beyond the end is known
+    /// ([`end_probe`]), τ sits at most this fraction of it above the
+    /// background: a dim fin (0.1–0.3 of the body's contrast) stays above τ.
+    pub fin_level_fraction: f32,
 }
 
 impl Default for SnakeParams {
@@ -61,6 +65,7 @@ impl Default for SnakeParams {
             iterations: 200,
             reach: 2,
             level_fraction: 0.15,
+            fin_level_fraction: 0.5,
         }
     }
 }
@@ -151,9 +156,41 @@ pub fn background_level(img: &ImageView<'_>, bbox: Roi, margin: u32) -> (f32, f3
     (med as f32, 1.4826 * mad as f32)
 }
 
+/// Mean grey level of the `side × side` square just beyond `end` along the
+/// unit direction `dir` (its centre `side/2 + 1` pixels out): the cheap test
+/// of whether anything brighter than the background continues past an end.
+/// `None` when less than half the square lies inside the image.
+pub fn end_probe(img: &ImageView<'_>, end: (f32, f32), dir: (f32, f32), side: u32) -> Option<f32> {
+    let side = side.clamp(1, 256) as i64;
+    let off = side as f32 * 0.5 + 1.0;
+    let (cx, cy) = (end.0 + dir.0 * off, end.1 + dir.1 * off);
+    if !(cx.is_finite() && cy.is_finite() && cx.abs() < 1.0e7 && cy.abs() < 1.0e7) {
+        return None;
+    }
+    let x0 = micromath::F32(cx).round().0 as i64 - side / 2;
+    let y0 = micromath::F32(cy).round().0 as i64 - side / 2;
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let (xa, xb) = (x0.max(0), (x0 + side).min(w));
+    let (ya, yb) = (y0.max(0), (y0 + side).min(h));
+    if xb <= xa || yb <= ya || 2 * (xb - xa) * (yb - ya) < side * side {
+        return None;
+    }
+    let mut sum = 0u64;
+    for y in ya..yb {
+        let row = img.row(y as usize);
+        for &v in row.get(xa as usize..xb as usize)? {
+            sum += v as u64;
+        }
+    }
+    Some(sum as f32 / ((xb - xa) * (yb - ya)) as f32)
+}
+
 /// Runs the tail snake beside the end point `end` of an object whose
 /// outward axis direction is `dir` (unit vector), oriented-box height `h_o`,
-/// body mean grey level `body_mean`, background `(bg, bg_sd)`.
+/// body mean grey level `body_mean`, background `(bg, bg_sd)`, and `fin`
+/// the contrast above the background measured just beyond the end
+/// ([`end_probe`]; `≤ 0`: unknown).
+#[allow(clippy::too_many_arguments)]
 pub fn tail_snake(
     img: &ImageView<'_>,
     end: (f32, f32),
@@ -161,6 +198,7 @@ pub fn tail_snake(
     h_o: f32,
     body_mean: f32,
     bg: (f32, f32),
+    fin: f32,
     p: &SnakeParams,
 ) -> SnakeResult {
     let nrm = micromath::F32(dir.0 * dir.0 + dir.1 * dir.1).sqrt().0;
@@ -177,7 +215,15 @@ pub fn tail_snake(
     let radius = h_o / 4.0;
     let (cx, cy) = (end.0 + ux * radius, end.1 + uy * radius);
     let contrast = (body_mean - bg.0).max(0.0);
-    let level = bg.0 + (p.level_fraction * contrast).max(3.0 * bg.1 / 5.0 + 1.0);
+    let mut above = p.level_fraction * contrast;
+    if fin > 0.0 && fin.is_finite() {
+        above = above.min(p.fin_level_fraction * fin);
+    }
+    // on a half-grey-level grid: the decision does not hang on rounding
+    let level = micromath::F32(2.0 * (bg.0 + above.max(3.0 * bg.1 / 5.0 + 1.0)))
+        .round()
+        .0
+        * 0.5;
     let mut pts = [(0.0f32, 0.0f32); SNAKE_POINTS];
     for (i, q) in pts.iter_mut().enumerate() {
         let a = i as f32 * core::f32::consts::TAU / SNAKE_POINTS as f32;
