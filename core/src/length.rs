@@ -19,8 +19,16 @@
 //!   (default on) also tries the snake at ends that pass eq. (15): a dim
 //!   tail cropped alike in both views is invisible to eq. (15) (on the
 //!   synthetic hauls every fish has a caudal fin of 0.1–0.55 of the body's
-//!   reflectivity, and the missing fin costs 12–17 % of the length). Such
-//!   a region is accepted only when (a) the snake finds a region of about
+//!   reflectivity, and the missing fin costs 12–17 % of the length). It
+//!   runs only where the evidence says the end is cut
+//!   ([`LengthConfig::probe_gate`]): the mean of an `h_o/2` square just
+//!   beyond the end ([`crate::snake::end_probe`]) stands above the local
+//!   background by at least the noise and 6 % of the body's contrast, and
+//!   at most half of it (a fin is dimmer than the body), in both views. A
+//!   whole (bright) tail ends on background, so the snake never runs there
+//!   and cannot lengthen it; the snake's level τ then sits at half the
+//!   fin's measured contrast, so it grows over the dim fin and stops at its
+//!   edge. Such a region is accepted only when (a) the snake finds a region of about
 //!   the same reach beside the right object's corresponding end
 //!   ([`LengthConfig::snake_both_views`]; the mesh and neighbours sit at
 //!   other disparities than the fish), (b) it fills at least
@@ -146,6 +154,10 @@ pub struct LengthConfig {
     pub probe_noise_k: f32,
     /// Body-contrast fraction of the probe gate.
     pub probe_body_fraction: f32,
+    /// A fin is dimmer than the body: above this fraction of the body's
+    /// contrast in either view, what continues past the end is something
+    /// else (a neighbour, glow) and the snake does not run there.
+    pub probe_max_body_fraction: f32,
 }
 
 impl Default for LengthConfig {
@@ -163,6 +175,7 @@ impl Default for LengthConfig {
             probe_gate: true,
             probe_noise_k: 1.0,
             probe_body_fraction: 0.06,
+            probe_max_body_fraction: 0.5,
         }
     }
 }
@@ -490,7 +503,9 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
         let gate = (cfg.probe_noise_k * bg.1)
             .max(cfg.probe_body_fraction * fe.contrast)
             .max(1.0);
-        let probed = !cfg.probe_gate || (pl >= gate && pr >= gate);
+        let ceiling = cfg.probe_max_body_fraction * fe.contrast;
+        let probed =
+            !cfg.probe_gate || (pl >= gate && pr >= gate && pl <= ceiling && pr <= ceiling);
         if params.tail_compensation && (flagged || (cfg.snake_every_end && probed)) {
             let sn = tail_snake(
                 left_img,

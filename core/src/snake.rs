@@ -14,7 +14,9 @@
 //!
 //! Points may not cross back behind the end (the body side). The level `τ`
 //! sits between the local background (median and MAD of a ring around the
-//! object's box) and the body mean. The enclosed region is accepted when it
+//! object's box) and the body mean, at most half the fin's own contrast
+//! when [`end_probe`] measured it (rounded to half a grey level, so the
+//! float reference makes the same pixel decisions). The enclosed region is accepted when it
 //! is large enough, mostly at or above `τ`, and within the closing radius
 //! (`h_o/4`) of the end: then, as the morphological closing of body and
 //! region would, it extends the body to the region's far end along the axis.

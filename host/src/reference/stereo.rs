@@ -800,7 +800,9 @@ pub fn length(
         let gate = (cfg.probe_noise_k as f64 * bg.1)
             .max(cfg.probe_body_fraction as f64 * (lo.mean - bg.0))
             .max(1.0);
-        let probed = !cfg.probe_gate || (pl >= gate && pr >= gate);
+        let ceiling = cfg.probe_max_body_fraction as f64 * (lo.mean - bg.0);
+        let probed =
+            !cfg.probe_gate || (pl >= gate && pr >= gate && pl <= ceiling && pr <= ceiling);
         let (fl, fr) = if cfg.probe_gate && !flagged {
             (pl, pr)
         } else {
