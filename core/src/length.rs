@@ -204,7 +204,7 @@ pub struct FishEnd {
     /// Grey-level contrast above the local background just beyond this end
     /// in the left and the right view ([`crate::snake::end_probe`]).
     pub probe: [f32; 2],
-    /// Left background robust SD and body contrast (body mean − background).
+    /// Left view's background robust SD (1.4826·MAD of the ring).
     pub noise: f32,
     /// Body mean minus background, left view.
     pub contrast: f32,

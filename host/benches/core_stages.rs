@@ -177,6 +177,9 @@ fn benches(c: &mut Criterion) {
     // the length stage (IV.D) alone, on the pairs of the frame just processed;
     // `length_stage_every_end`: without the probe gate (a snake at every end,
     // as before the gate)
+    frame_no += 1;
+    pipe.process_frame(frame_no, lv, rv, &mut ws, &mut |_| {})
+        .unwrap();
     let lcfg = PipelineConfig::new(params, geometry(), W as u32, H as u32);
     let mut every = lcfg;
     every.length.probe_gate = false;
