@@ -418,3 +418,78 @@ fn point_in_polygon(pts: &[(f32, f32); SNAKE_POINTS], x: f32, y: f32) -> bool {
     }
     inside
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    /// Background 20, a "fin" of grey 30 over x ∈ [60, 80), y ∈ [40, 60)
+    /// (`wide`: x ∈ [60, 90), y ∈ [30, 70)).
+    fn scene(wide: bool) -> [u8; 100 * 100] {
+        let mut px = [20u8; 100 * 100];
+        let (ys, xs) = if wide {
+            (30..70, 60..90)
+        } else {
+            (40..60, 60..80)
+        };
+        for y in ys {
+            for x in xs.clone() {
+                px[y * 100 + x] = 30;
+            }
+        }
+        px
+    }
+
+    #[test]
+    fn end_probe_reads_the_square_beyond_the_end() {
+        let px = scene(false);
+        let img = ImageView::packed(&px, 100, 100).unwrap();
+        // end at x = 59, looking +x: square of side 10 centred at x = 65 → all fin
+        let m = end_probe(&img, (59.0, 50.0), (1.0, 0.0), 10).unwrap();
+        assert_eq!(m, 30.0);
+        // looking −x from x = 59: background only
+        let m = end_probe(&img, (59.0, 50.0), (-1.0, 0.0), 10).unwrap();
+        assert_eq!(m, 20.0);
+        // centred at x = 80 (end at 74): half fin (x 75..80), half water (80..85)
+        let m = end_probe(&img, (74.0, 50.0), (1.0, 0.0), 10).unwrap();
+        assert_eq!(m, 25.0);
+        // mostly outside the image
+        assert_eq!(end_probe(&img, (98.0, 50.0), (1.0, 0.0), 10), None);
+        assert_eq!(end_probe(&img, (f32::NAN, 50.0), (1.0, 0.0), 10), None);
+    }
+
+    #[test]
+    fn the_fin_level_lets_the_snake_cover_a_dim_fin() {
+        let px = scene(true);
+        let img = ImageView::packed(&px, 100, 100).unwrap();
+        let p = SnakeParams::default();
+        // body 20 + 100 = 120: the body-relative level (20 + 15) is above the
+        // fin, the fin-relative one (20 + 5) below it
+        let blind = tail_snake(
+            &img,
+            (59.5, 50.0),
+            (1.0, 0.0),
+            40.0,
+            120.0,
+            (20.0, 0.0),
+            0.0,
+            &p,
+        );
+        assert!(!blind.accepted);
+        let seen = tail_snake(
+            &img,
+            (59.5, 50.0),
+            (1.0, 0.0),
+            40.0,
+            120.0,
+            (20.0, 0.0),
+            10.0,
+            &p,
+        );
+        assert_eq!(seen.level, 25.0);
+        assert!(seen.accepted, "{seen:?}");
+        // the region stops at the fin's edge (x = 89, 29.5 px beyond the end)
+        assert!((seen.far_t - 29.5).abs() <= 2.0, "{}", seen.far_t);
+    }
+}
