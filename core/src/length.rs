@@ -19,8 +19,16 @@
 //!   (default on) also tries the snake at ends that pass eq. (15): a dim
 //!   tail cropped alike in both views is invisible to eq. (15) (on the
 //!   synthetic hauls every fish has a caudal fin of 0.1–0.55 of the body's
-//!   reflectivity, and the missing fin costs 12–17 % of the length). Such
-//!   a region is accepted only when (a) the snake finds a region of about
+//!   reflectivity, and the missing fin costs 12–17 % of the length). It
+//!   runs only where the evidence says the end is cut
+//!   ([`LengthConfig::probe_gate`]): the mean of an `h_o/2` square just
+//!   beyond the end ([`crate::snake::end_probe`]) stands above the local
+//!   background by at least the noise and 6 % of the body's contrast, and
+//!   at most half of it (a fin is dimmer than the body), in both views. A
+//!   whole (bright) tail ends on background, so the snake never runs there
+//!   and cannot lengthen it; the snake's level τ then sits at half the
+//!   fin's measured contrast, so it grows over the dim fin and stops at its
+//!   edge. Such a region is accepted only when (a) the snake finds a region of about
 //!   the same reach beside the right object's corresponding end
 //!   ([`LengthConfig::snake_both_views`]; the mesh and neighbours sit at
 //!   other disparities than the fish), (b) it fills at least
@@ -51,7 +59,7 @@ use crate::image::{ImageView, Roi};
 use crate::object::{Object, Objects, Run};
 use crate::params::Params;
 use crate::refine::{refine_disparity, RefinedBlock};
-use crate::snake::{background_level, tail_snake, SnakeParams};
+use crate::snake::{background_level, end_probe, tail_snake, SnakeParams};
 use crate::stereo::StereoPair;
 use nalgebra::Vector3;
 
@@ -135,6 +143,21 @@ pub struct LengthConfig {
     /// Least above-level area of an accepted tail region, as a fraction of
     /// `far_t · h_o` (its reach times the body height).
     pub min_fin_fill: f32,
+    /// At ends eq. (15) did not flag, run the snake only where something
+    /// brighter than the background continues past the end in both views
+    /// ([`crate::snake::end_probe`] over an `h_o/2` square): its contrast
+    /// must reach `max(probe_noise_k · σ_bg, probe_body_fraction · (body −
+    /// background), 1)` grey levels. A fully segmented (bright) tail ends on
+    /// background and is left alone; a dim fin cut alike in both views shows.
+    pub probe_gate: bool,
+    /// Noise multiple of the probe gate.
+    pub probe_noise_k: f32,
+    /// Body-contrast fraction of the probe gate.
+    pub probe_body_fraction: f32,
+    /// A fin is dimmer than the body: above this fraction of the body's
+    /// contrast in either view, what continues past the end is something
+    /// else (a neighbour, glow) and the snake does not run there.
+    pub probe_max_body_fraction: f32,
 }
 
 impl Default for LengthConfig {
@@ -146,9 +169,13 @@ impl Default for LengthConfig {
             sad_ratio_scale: 9.0,
             mask_end_tolerance: 8.0,
             max_end_disagreement: 0.04,
-            max_tail_fraction: 0.25,
+            max_tail_fraction: 0.3,
             snake_both_views: true,
             min_fin_fill: 0.15,
+            probe_gate: true,
+            probe_noise_k: 1.0,
+            probe_body_fraction: 0.06,
+            probe_max_body_fraction: 0.5,
         }
     }
 }
@@ -174,6 +201,13 @@ pub struct FishEnd {
     pub mismatch: bool,
     /// The tail snake extended this end.
     pub compensated: bool,
+    /// Grey-level contrast above the local background just beyond this end
+    /// in the left and the right view ([`crate::snake::end_probe`]).
+    pub probe: [f32; 2],
+    /// Left view's background robust SD (1.4826·MAD of the ring).
+    pub noise: f32,
+    /// Body mean minus background, left view.
+    pub contrast: f32,
 }
 
 /// The 3-D length of one stereo pair in one frame.
@@ -459,7 +493,20 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
         fe.sad_ratio = ratio;
         fe.mismatch = mismatch;
         fe.mask_d = end.0 - re.0;
-        if params.tail_compensation && ((mismatch && left_short) || cfg.snake_every_end) {
+        let pside = ((h_o * 0.5) as u32).max(3);
+        let pl = end_probe(left_img, end, (s * ux, s * uy), pside).map_or(0.0, |m| m - bg.0);
+        let pr = end_probe(right_img, (re.0, re.1), (rox, roy), pside).map_or(0.0, |m| m - rbg.0);
+        fe.probe = [pl, pr];
+        fe.noise = bg.1;
+        fe.contrast = lo.mean - bg.0;
+        let flagged = mismatch && left_short;
+        let gate = (cfg.probe_noise_k * bg.1)
+            .max(cfg.probe_body_fraction * fe.contrast)
+            .max(1.0);
+        let ceiling = cfg.probe_max_body_fraction * fe.contrast;
+        let probed =
+            !cfg.probe_gate || (pl >= gate && pr >= gate && pl <= ceiling && pr <= ceiling);
+        if params.tail_compensation && (flagged || (cfg.snake_every_end && probed)) {
             let sn = tail_snake(
                 left_img,
                 end,
@@ -467,6 +514,7 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
                 h_o,
                 lo.mean,
                 bg,
+                if cfg.probe_gate && !flagged { pl } else { 0.0 },
                 &cfg.snake,
             );
             // a caudal fin is a fraction of the body: a longer region is
@@ -474,7 +522,6 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
             // the same tail must be found beside the right object's end
             // (not needed where eq. (15) flagged the end: there the right
             // object already holds the tail the left one lacks)
-            let flagged = mismatch && left_short;
             let agree = if cfg.snake_both_views && sn.accepted && !flagged {
                 let rs = tail_snake(
                     right_img,
@@ -483,6 +530,7 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
                     rh_o,
                     ro.mean,
                     rbg,
+                    if cfg.probe_gate && !flagged { pr } else { 0.0 },
                     &cfg.snake,
                 );
                 rs.accepted && (rs.far_t - sn.far_t).abs() <= (0.3 * sn.far_t).max(4.0)

@@ -14,7 +14,9 @@
 //!
 //! Points may not cross back behind the end (the body side). The level `τ`
 //! sits between the local background (median and MAD of a ring around the
-//! object's box) and the body mean. The enclosed region is accepted when it
+//! object's box) and the body mean, at most half the fin's own contrast
+//! when [`end_probe`] measured it (rounded to half a grey level, so the
+//! float reference makes the same pixel decisions). The enclosed region is accepted when it
 //! is large enough, mostly at or above `τ`, and within the closing radius
 //! (`h_o/4`) of the end: then, as the morphological closing of body and
 //! region would, it extends the body to the region's far end along the axis.
@@ -49,6 +51,10 @@ pub struct SnakeParams {
     pub reach: u8,
     /// Fraction of the background-to-body contrast that sets the tail level τ.
     pub level_fraction: f32,
+    /// When the fin's own contrast just beyond the end is known
+    /// ([`end_probe`]), τ sits at most this fraction of it above the
+    /// background: a dim fin (0.1–0.3 of the body's contrast) stays above τ.
+    pub fin_level_fraction: f32,
 }
 
 impl Default for SnakeParams {
@@ -61,6 +67,7 @@ impl Default for SnakeParams {
             iterations: 200,
             reach: 2,
             level_fraction: 0.15,
+            fin_level_fraction: 0.5,
         }
     }
 }
@@ -151,9 +158,41 @@ pub fn background_level(img: &ImageView<'_>, bbox: Roi, margin: u32) -> (f32, f3
     (med as f32, 1.4826 * mad as f32)
 }
 
+/// Mean grey level of the `side × side` square just beyond `end` along the
+/// unit direction `dir` (its centre `side/2 + 1` pixels out): the cheap test
+/// of whether anything brighter than the background continues past an end.
+/// `None` when less than half the square lies inside the image.
+pub fn end_probe(img: &ImageView<'_>, end: (f32, f32), dir: (f32, f32), side: u32) -> Option<f32> {
+    let side = side.clamp(1, 256) as i64;
+    let off = side as f32 * 0.5 + 1.0;
+    let (cx, cy) = (end.0 + dir.0 * off, end.1 + dir.1 * off);
+    if !(cx.is_finite() && cy.is_finite() && cx.abs() < 1.0e7 && cy.abs() < 1.0e7) {
+        return None;
+    }
+    let x0 = micromath::F32(cx).round().0 as i64 - side / 2;
+    let y0 = micromath::F32(cy).round().0 as i64 - side / 2;
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let (xa, xb) = (x0.max(0), (x0 + side).min(w));
+    let (ya, yb) = (y0.max(0), (y0 + side).min(h));
+    if xb <= xa || yb <= ya || 2 * (xb - xa) * (yb - ya) < side * side {
+        return None;
+    }
+    let mut sum = 0u64;
+    for y in ya..yb {
+        let row = img.row(y as usize);
+        for &v in row.get(xa as usize..xb as usize)? {
+            sum += v as u64;
+        }
+    }
+    Some(sum as f32 / ((xb - xa) * (yb - ya)) as f32)
+}
+
 /// Runs the tail snake beside the end point `end` of an object whose
 /// outward axis direction is `dir` (unit vector), oriented-box height `h_o`,
-/// body mean grey level `body_mean`, background `(bg, bg_sd)`.
+/// body mean grey level `body_mean`, background `(bg, bg_sd)`, and `fin`
+/// the contrast above the background measured just beyond the end
+/// ([`end_probe`]; `≤ 0`: unknown).
+#[allow(clippy::too_many_arguments)]
 pub fn tail_snake(
     img: &ImageView<'_>,
     end: (f32, f32),
@@ -161,6 +200,7 @@ pub fn tail_snake(
     h_o: f32,
     body_mean: f32,
     bg: (f32, f32),
+    fin: f32,
     p: &SnakeParams,
 ) -> SnakeResult {
     let nrm = micromath::F32(dir.0 * dir.0 + dir.1 * dir.1).sqrt().0;
@@ -177,7 +217,15 @@ pub fn tail_snake(
     let radius = h_o / 4.0;
     let (cx, cy) = (end.0 + ux * radius, end.1 + uy * radius);
     let contrast = (body_mean - bg.0).max(0.0);
-    let level = bg.0 + (p.level_fraction * contrast).max(3.0 * bg.1 / 5.0 + 1.0);
+    let mut above = p.level_fraction * contrast;
+    if fin > 0.0 && fin.is_finite() {
+        above = above.min(p.fin_level_fraction * fin);
+    }
+    // on a half-grey-level grid: the decision does not hang on rounding
+    let level = micromath::F32(2.0 * (bg.0 + above.max(3.0 * bg.1 / 5.0 + 1.0)))
+        .round()
+        .0
+        * 0.5;
     let mut pts = [(0.0f32, 0.0f32); SNAKE_POINTS];
     for (i, q) in pts.iter_mut().enumerate() {
         let a = i as f32 * core::f32::consts::TAU / SNAKE_POINTS as f32;
@@ -369,4 +417,79 @@ fn point_in_polygon(pts: &[(f32, f32); SNAKE_POINTS], x: f32, y: f32) -> bool {
         j = i;
     }
     inside
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    /// Background 20, a "fin" of grey 30 over x ∈ [60, 80), y ∈ [40, 60)
+    /// (`wide`: x ∈ [60, 90), y ∈ [30, 70)).
+    fn scene(wide: bool) -> [u8; 100 * 100] {
+        let mut px = [20u8; 100 * 100];
+        let (ys, xs) = if wide {
+            (30..70, 60..90)
+        } else {
+            (40..60, 60..80)
+        };
+        for y in ys {
+            for x in xs.clone() {
+                px[y * 100 + x] = 30;
+            }
+        }
+        px
+    }
+
+    #[test]
+    fn end_probe_reads_the_square_beyond_the_end() {
+        let px = scene(false);
+        let img = ImageView::packed(&px, 100, 100).unwrap();
+        // end at x = 59, looking +x: square of side 10 centred at x = 65 → all fin
+        let m = end_probe(&img, (59.0, 50.0), (1.0, 0.0), 10).unwrap();
+        assert_eq!(m, 30.0);
+        // looking −x from x = 59: background only
+        let m = end_probe(&img, (59.0, 50.0), (-1.0, 0.0), 10).unwrap();
+        assert_eq!(m, 20.0);
+        // centred at x = 80 (end at 74): half fin (x 75..80), half water (80..85)
+        let m = end_probe(&img, (74.0, 50.0), (1.0, 0.0), 10).unwrap();
+        assert_eq!(m, 25.0);
+        // mostly outside the image
+        assert_eq!(end_probe(&img, (98.0, 50.0), (1.0, 0.0), 10), None);
+        assert_eq!(end_probe(&img, (f32::NAN, 50.0), (1.0, 0.0), 10), None);
+    }
+
+    #[test]
+    fn the_fin_level_lets_the_snake_cover_a_dim_fin() {
+        let px = scene(true);
+        let img = ImageView::packed(&px, 100, 100).unwrap();
+        let p = SnakeParams::default();
+        // body 20 + 100 = 120: the body-relative level (20 + 15) is above the
+        // fin, the fin-relative one (20 + 5) below it
+        let blind = tail_snake(
+            &img,
+            (59.5, 50.0),
+            (1.0, 0.0),
+            40.0,
+            120.0,
+            (20.0, 0.0),
+            0.0,
+            &p,
+        );
+        assert!(!blind.accepted);
+        let seen = tail_snake(
+            &img,
+            (59.5, 50.0),
+            (1.0, 0.0),
+            40.0,
+            120.0,
+            (20.0, 0.0),
+            10.0,
+            &p,
+        );
+        assert_eq!(seen.level, 25.0);
+        assert!(seen.accepted, "{seen:?}");
+        // the region stops at the fin's edge (x = 89, 29.5 px beyond the end)
+        assert!((seen.far_t - 29.5).abs() <= 2.0, "{}", seen.far_t);
+    }
 }

@@ -98,7 +98,7 @@ proptest! {
         for p in pairs.pairs.iter() {
             let _ = measure_length::<N, R, 32>(&lv, &rv, &left, &right, p, &geom, &params, &cfg);
         }
-        let _ = tail_snake(&lv, (d_o, d_o), (f32::NAN, 0.0), d_o, 100.0, (30.0, 2.0), &cfg.snake);
+        let _ = tail_snake(&lv, (d_o, d_o), (f32::NAN, 0.0), d_o, 100.0, (30.0, 2.0), d_o, &cfg.snake);
         let mut acc = LengthAccumulator::<3>::new();
         for k in 0..5 { acc.push(Some(d_o + k as f32), k % 2 == 0); }
         let _ = acc.estimate();

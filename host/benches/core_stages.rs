@@ -1,8 +1,8 @@
 //! Criterion benches of the core stages on synthetic 2048 × 2048 frames
 //! (issue 8): mesh removal (Section V.A), the 7 × 7 gradient (III.A), the
 //! gradient histogram + threshold, streaming labels, a whole-frame
-//! segmentation, the fixed-point remap (IV.A) and the whole pipeline on a
-//! stereo pair.
+//! segmentation, the fixed-point remap (IV.A), the whole pipeline on a
+//! stereo pair and its length stage (IV.D) alone.
 //!
 //! `cargo bench -p fishtrack --bench core_stages` (add `-- --quick` for a
 //! short run). The frames are procedural, deterministic: noisy water, a
@@ -18,9 +18,10 @@ use nalgebra::Matrix3x4;
 use fishtrack_core::geometry::StereoGeometry;
 use fishtrack_core::hist::add_row_256;
 use fishtrack_core::label::{StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use fishtrack_core::length::measure_length;
 use fishtrack_core::morph::{disk_scratch_len, gradient_disk, remove_mesh, Disk};
 use fishtrack_core::object::Objects;
-use fishtrack_core::pipeline::{DefaultPipeline, PipelineConfig};
+use fishtrack_core::pipeline::{DefaultPipeline, PipelineConfig, REFINE_BLOCKS};
 use fishtrack_core::remap::{pack, remap_bilinear, RemapTable};
 use fishtrack_core::segment::coarse::gradient_threshold;
 use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI_PIXELS};
@@ -173,6 +174,37 @@ fn benches(c: &mut Criterion) {
                 .unwrap()
         })
     });
+    // the length stage (IV.D) alone, on the pairs of the frame just processed;
+    // `length_stage_every_end`: without the probe gate (a snake at every end,
+    // as before the gate)
+    frame_no += 1;
+    pipe.process_frame(frame_no, lv, rv, &mut ws, &mut |_| {})
+        .unwrap();
+    let lcfg = PipelineConfig::new(params, geometry(), W as u32, H as u32);
+    let mut every = lcfg;
+    every.length.probe_gate = false;
+    for (name, lcfg) in [("length_stage", lcfg), ("length_stage_every_end", every)] {
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut total = 0.0f32;
+                for p in pipe.pairs().pairs.iter() {
+                    if let Ok(l) = measure_length::<_, _, REFINE_BLOCKS>(
+                        black_box(&lv),
+                        black_box(&rv),
+                        pipe.left_objects(),
+                        pipe.right_objects(),
+                        p,
+                        &lcfg.geometry,
+                        &lcfg.params,
+                        &lcfg.length,
+                    ) {
+                        total += l.length_mm;
+                    }
+                }
+                total
+            })
+        });
+    }
     g.finish();
 }
 

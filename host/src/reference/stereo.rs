@@ -542,15 +542,18 @@ fn snake(
     h_o: f64,
     body_mean: f64,
     bg: (f64, f64),
+    fin: f64,
     p: &fishtrack_core::snake::SnakeParams,
 ) -> Option<(f64, f64)> {
     const K: usize = fishtrack_core::snake::SNAKE_POINTS;
     let h_o = h_o.clamp(4.0, 4096.0);
     let radius = h_o / 4.0;
     let centre = (end.0 + u.0 * radius, end.1 + u.1 * radius);
-    let level =
-        bg.0 + (p.level_fraction as f64 * (body_mean - bg.0).max(0.0)).max(3.0 * bg.1 / 5.0 + 1.0);
-    let level = level as f32 as f64;
+    let mut above = p.level_fraction as f64 * (body_mean - bg.0).max(0.0);
+    if fin > 0.0 {
+        above = above.min(p.fin_level_fraction as f64 * fin);
+    }
+    let level = (2.0 * (bg.0 + above.max(3.0 * bg.1 / 5.0 + 1.0))).round() * 0.5;
     let mut pts: Vec<(f64, f64)> = (0..K)
         .map(|i| {
             let a = i as f64 * std::f64::consts::TAU / K as f64;
@@ -656,6 +659,25 @@ fn snake(
         && near <= radius
         && far > 1.0;
     accepted.then_some((far, area * (n_hi as f64 / n_in as f64)))
+}
+
+/// Mean of the `side × side` square centred `side/2 + 1` pixels beyond
+/// `end` along `u` (as `core::snake::end_probe`).
+fn probe(img: &Gray, end: (f64, f64), u: (f64, f64), side: i64) -> Option<f64> {
+    let side = side.clamp(1, 256);
+    let off = side as f64 * 0.5 + 1.0;
+    let x0 = (end.0 + u.0 * off).round() as i64 - side / 2;
+    let y0 = (end.1 + u.1 * off).round() as i64 - side / 2;
+    let (mut sum, mut n) = (0.0, 0i64);
+    for y in y0..y0 + side {
+        for x in x0..x0 + side {
+            if let Some(v) = img.at(x, y) {
+                sum += v;
+                n += 1;
+            }
+        }
+    }
+    (n > 0 && 2 * n >= side * side).then(|| sum / n as f64)
 }
 
 fn dist(a: (f64, f64), b: (f64, f64)) -> f64 {
@@ -770,9 +792,25 @@ pub fn length(
         let mismatch = ratio * cfg.sad_ratio_scale as f64 > params.theta_sad as f64;
         let left_short = (re.0 + p.d_o - end.0) * s * u.0 + (re.1 - end.1) * s * u.1 > 1.0;
         let flagged = mismatch && left_short;
-        if params.tail_compensation && (flagged || cfg.snake_every_end) {
+        // the probe gate: something brighter than the background continues
+        // past the end in both views
+        let pside = ((h_o * 0.5) as i64).max(3);
+        let pl = probe(l, end, (s * u.0, s * u.1), pside).map_or(0.0, |m| m - bg.0);
+        let pr = probe(r, re, (rs * ru.0, rs * ru.1), pside).map_or(0.0, |m| m - rbg.0);
+        let gate = (cfg.probe_noise_k as f64 * bg.1)
+            .max(cfg.probe_body_fraction as f64 * (lo.mean - bg.0))
+            .max(1.0);
+        let ceiling = cfg.probe_max_body_fraction as f64 * (lo.mean - bg.0);
+        let probed =
+            !cfg.probe_gate || (pl >= gate && pr >= gate && pl <= ceiling && pr <= ceiling);
+        let (fl, fr) = if cfg.probe_gate && !flagged {
+            (pl, pr)
+        } else {
+            (0.0, 0.0)
+        };
+        if params.tail_compensation && (flagged || (cfg.snake_every_end && probed)) {
             if let Some((far, filled)) =
-                snake(l, end, (s * u.0, s * u.1), h_o, lo.mean, bg, &cfg.snake)
+                snake(l, end, (s * u.0, s * u.1), h_o, lo.mean, bg, fl, &cfg.snake)
             {
                 // the right view must show the same tail (unless eq. 15 flagged the end)
                 let agree = !cfg.snake_both_views
@@ -784,6 +822,7 @@ pub fn length(
                         rh_o,
                         ro.mean,
                         rbg,
+                        fr,
                         &cfg.snake,
                     )
                     .is_some_and(|(rfar, _)| (rfar - far).abs() <= (0.3 * far).max(4.0));
