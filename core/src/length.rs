@@ -414,7 +414,7 @@ pub fn resistant_line<const B: usize>(
 fn unit_axis(obj: &Object) -> (f32, f32) {
     let a = obj.obb.angle;
     if a.is_finite() {
-        (micromath::F32(a).cos().0, micromath::F32(a).sin().0)
+        (libm::cosf(a), libm::sinf(a))
     } else {
         (1.0, 0.0)
     }

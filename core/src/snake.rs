@@ -106,7 +106,7 @@ fn smooth(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
 fn grad(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
     let gx = smooth(img, x + 1, y) - smooth(img, x - 1, y);
     let gy = smooth(img, x, y + 1) - smooth(img, x, y - 1);
-    micromath::F32(gx * gx + gy * gy).sqrt().0
+    libm::sqrtf(gx * gx + gy * gy)
 }
 
 /// Background level around `bbox`: median and 1.4826·MAD of up to 512 pixels
@@ -203,7 +203,7 @@ pub fn tail_snake(
     fin: f32,
     p: &SnakeParams,
 ) -> SnakeResult {
-    let nrm = micromath::F32(dir.0 * dir.0 + dir.1 * dir.1).sqrt().0;
+    let nrm = libm::sqrtf(dir.0 * dir.0 + dir.1 * dir.1);
     let (ux, uy) = if nrm > 1e-6 && nrm.is_finite() {
         (dir.0 / nrm, dir.1 / nrm)
     } else {
@@ -229,9 +229,11 @@ pub fn tail_snake(
     let mut pts = [(0.0f32, 0.0f32); SNAKE_POINTS];
     for (i, q) in pts.iter_mut().enumerate() {
         let a = i as f32 * core::f32::consts::TAU / SNAKE_POINTS as f32;
+        // on whole pixels: every later position is a whole-pixel move, so
+        // the pixels the snake samples do not hang on rounding
         *q = (
-            cx + radius * micromath::F32(a).cos().0,
-            cy + radius * micromath::F32(a).sin().0,
+            libm::roundf(cx + radius * libm::cosf(a)),
+            libm::roundf(cy + radius * libm::sinf(a)),
         );
     }
     let reach = p.reach.clamp(1, 4) as i32;
@@ -245,9 +247,7 @@ pub fn tail_snake(
         for i in 0..SNAKE_POINTS {
             let a = pts[i];
             let b = pts[(i + 1) % SNAKE_POINTS];
-            per += micromath::F32((a.0 - b.0) * (a.0 - b.0) + (a.1 - b.1) * (a.1 - b.1))
-                .sqrt()
-                .0;
+            per += libm::sqrtf((a.0 - b.0) * (a.0 - b.0) + (a.1 - b.1) * (a.1 - b.1));
         }
         let dbar = (per / SNAKE_POINTS as f32).max(0.5);
         // centroid for the outward normal
@@ -268,7 +268,7 @@ pub fn tail_snake(
                 nx = -nx;
                 ny = -ny;
             }
-            let nn = micromath::F32(nx * nx + ny * ny).sqrt().0;
+            let nn = libm::sqrtf(nx * nx + ny * ny);
             if nn > 1e-6 {
                 nx /= nn;
                 ny /= nn;
@@ -296,11 +296,9 @@ pub fn tail_snake(
                         -1.0
                     };
                     let push = (dx as f32 * nx + dy as f32 * ny) / reach as f32;
-                    let dc = micromath::F32(
+                    let dc = libm::sqrtf(
                         (q.0 - prev.0) * (q.0 - prev.0) + (q.1 - prev.1) * (q.1 - prev.1),
-                    )
-                    .sqrt()
-                    .0;
+                    );
                     let cont = (dbar - dc).abs() / dbar;
                     let (kx, ky) = (prev.0 - 2.0 * q.0 + next.0, prev.1 - 2.0 * q.1 + next.1);
                     let curv = (kx * kx + ky * ky) / (dbar * dbar);

@@ -557,7 +557,11 @@ fn snake(
     let mut pts: Vec<(f64, f64)> = (0..K)
         .map(|i| {
             let a = i as f64 * std::f64::consts::TAU / K as f64;
-            (centre.0 + radius * a.cos(), centre.1 + radius * a.sin())
+            // on whole pixels (core: `snake::tail_snake`)
+            (
+                (centre.0 + radius * a.cos()).round(),
+                (centre.1 + radius * a.sin()).round(),
+            )
         })
         .collect();
     let reach = p.reach.clamp(1, 4) as i64;
