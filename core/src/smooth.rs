@@ -52,6 +52,14 @@ pub fn box_mean_roi(
     let colsum = colsum.get_mut(..cw).ok_or(SmoothError::BufferTooSmall)?;
     let out = out.get_mut(..rw * rh).ok_or(SmoothError::BufferTooSmall)?;
     let (x0, y0) = (roi.x as usize, roi.y as usize);
+    if k == 1 {
+        for (j, orow) in out.chunks_exact_mut(rw).enumerate() {
+            if let Some(src) = frame.row(y0 + j).get(x0..x0 + rw) {
+                orow.copy_from_slice(src);
+            }
+        }
+        return Ok(());
+    }
     // frame column of halo column i (replicated border)
     let col = |i: usize| (x0 + i).saturating_sub(r).min(fw - 1);
     let row_of = |y: isize| -> &[u8] { frame.row(y.clamp(0, fh as isize - 1) as usize) };
