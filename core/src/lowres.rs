@@ -345,33 +345,62 @@ mod tests {
         out
     }
 
+    /// xorshift pixels of `w × h`, each the top bits of the state above `shift`.
+    fn pixels(w: usize, h: usize, seed: u64, shift: u32) -> Vec<u64> {
+        let mut s = seed | 1;
+        (0..w * h)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                s >> shift
+            })
+            .collect()
+    }
+
+    fn check_mean16(w: usize, h: usize, f: usize, seed: u64) -> Result<(), TestCaseError> {
+        let img: Vec<u8> = pixels(w, h, seed, 24)
+            .into_iter()
+            .map(|p| p as u8)
+            .collect();
+        let v = ImageView::packed(&img, w, h).unwrap();
+        let (lw, lh) = low_size(w, h, f);
+        let mut out = vec![0u16; lw * lh];
+        prop_assert_eq!(box_mean16(v, f, &mut out), Ok((lw, lh)));
+        prop_assert_eq!(out, naive_mean16(&img, w, h, f));
+        Ok(())
+    }
+
+    fn check_gradient(
+        w: usize,
+        h: usize,
+        size: u8,
+        seed: u64,
+        shift: u32,
+    ) -> Result<(), TestCaseError> {
+        let img: Vec<u16> = pixels(w, h, seed, shift)
+            .into_iter()
+            .map(|p| p as u16)
+            .collect();
+        let disk = Disk::opencv_ellipse(2 * size + 1);
+        let mut out = vec![0u16; w * h];
+        prop_assert_eq!(gradient_disk_u16(&img, w, h, &disk, &mut out), Ok(()));
+        prop_assert_eq!(out, naive_gradient(&img, w, h, &disk));
+        Ok(())
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 2 } else { 64 }))]
         #[test]
         fn mean16_equals_naive(w in 1usize..70, h in 1usize..20, f in 1usize..9,
                                seed in any::<u64>()) {
-            let mut s = seed | 1;
-            let img: Vec<u8> = (0..w * h).map(|_| {
-                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 24) as u8
-            }).collect();
-            let v = ImageView::packed(&img, w, h).unwrap();
-            let (lw, lh) = low_size(w, h, f);
-            let mut out = vec![0u16; lw * lh];
-            prop_assert_eq!(box_mean16(v, f, &mut out), Ok((lw, lh)));
-            prop_assert_eq!(out, naive_mean16(&img, w, h, f));
+            check_mean16(w, h, f, seed)?;
         }
 
         #[test]
         fn gradient_equals_naive(w in 1usize..30, h in 1usize..30, size in 0u8..4,
                                  seed in any::<u64>()) {
-            let mut s = seed | 1;
-            let img: Vec<u16> = (0..w * h).map(|_| {
-                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 52) as u16
-            }).collect();
-            let disk = Disk::opencv_ellipse(2 * size + 1);
-            let mut out = vec![0u16; w * h];
-            prop_assert_eq!(gradient_disk_u16(&img, w, h, &disk, &mut out), Ok(()));
-            prop_assert_eq!(out, naive_gradient(&img, w, h, &disk));
+            check_gradient(w, h, size, seed, 52)?;
         }
 
         /// Across several column chunks, and factors above the chunk.
@@ -379,29 +408,14 @@ mod tests {
         fn wide_mean16_equals_naive(w in 200usize..700, h in 1usize..6,
                                     f in prop::sample::select(vec![1usize, 3, 4, 5, 16, 300]),
                                     seed in any::<u64>()) {
-            let mut s = seed | 1;
-            let img: Vec<u8> = (0..w * h).map(|_| {
-                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 24) as u8
-            }).collect();
-            let v = ImageView::packed(&img, w, h).unwrap();
-            let (lw, lh) = low_size(w, h, f);
-            let mut out = vec![0u16; lw * lh];
-            prop_assert_eq!(box_mean16(v, f, &mut out), Ok((lw, lh)));
-            prop_assert_eq!(out, naive_mean16(&img, w, h, f));
+            check_mean16(w, h, f, seed)?;
         }
 
         /// Across several column chunks, with disks up to 9 × 9.
         #[test]
         fn wide_gradient_equals_naive(w in 200usize..600, h in 1usize..10, size in 0u8..5,
                                       seed in any::<u64>()) {
-            let mut s = seed | 1;
-            let img: Vec<u16> = (0..w * h).map(|_| {
-                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 48) as u16
-            }).collect();
-            let disk = Disk::opencv_ellipse(2 * size + 1);
-            let mut out = vec![0u16; w * h];
-            prop_assert_eq!(gradient_disk_u16(&img, w, h, &disk, &mut out), Ok(()));
-            prop_assert_eq!(out, naive_gradient(&img, w, h, &disk));
+            check_gradient(w, h, size, seed, 48)?;
         }
 
         #[test]

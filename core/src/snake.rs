@@ -464,27 +464,21 @@ mod tests {
         let p = SnakeParams::default();
         // body 20 + 100 = 120: the body-relative level (20 + 15) is above the
         // fin, the fin-relative one (20 + 5) below it
-        let blind = tail_snake(
-            &img,
-            (59.5, 50.0),
-            (1.0, 0.0),
-            40.0,
-            120.0,
-            (20.0, 0.0),
-            0.0,
-            &p,
-        );
+        let run = |fin: f32| {
+            tail_snake(
+                &img,
+                (59.5, 50.0),
+                (1.0, 0.0),
+                40.0,
+                120.0,
+                (20.0, 0.0),
+                fin,
+                &p,
+            )
+        };
+        let blind = run(0.0);
         assert!(!blind.accepted);
-        let seen = tail_snake(
-            &img,
-            (59.5, 50.0),
-            (1.0, 0.0),
-            40.0,
-            120.0,
-            (20.0, 0.0),
-            10.0,
-            &p,
-        );
+        let seen = run(10.0);
         assert_eq!(seen.level, 25.0);
         assert!(seen.accepted, "{seen:?}");
         // the region stops at the fin's edge (x = 89, 29.5 px beyond the end)
