@@ -633,15 +633,7 @@ impl<'a> StreamLabeler<'a> {
             while x < width && fg(x) {
                 x += 1;
             }
-            self.cur.set(
-                n_cur,
-                LabelRun {
-                    x0: x0 as u32,
-                    x1: x as u32,
-                    label: u32::MAX,
-                },
-            );
-            n_cur += 1;
+            self.open_run(&mut n_cur, x0, x);
         }
         self.connect(n_cur, done);
     }
@@ -677,17 +669,22 @@ impl<'a> StreamLabeler<'a> {
             while x < width && row[x] > t {
                 x += 1;
             }
-            self.cur.set(
-                n_cur,
-                LabelRun {
-                    x0: x0 as u32,
-                    x1: x as u32,
-                    label: u32::MAX,
-                },
-            );
-            n_cur += 1;
+            self.open_run(&mut n_cur, x0, x);
         }
         self.connect(n_cur, done);
+    }
+
+    /// Appends the unlabelled run `[x0, x1)` as the current row's `n_cur`-th.
+    fn open_run(&mut self, n_cur: &mut usize, x0: usize, x1: usize) {
+        self.cur.set(
+            *n_cur,
+            LabelRun {
+                x0: x0 as u32,
+                x1: x1 as u32,
+                label: u32::MAX,
+            },
+        );
+        *n_cur += 1;
     }
 
     /// Connects the `n_cur` runs of the current row to the previous row's,

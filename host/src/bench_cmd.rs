@@ -24,6 +24,7 @@
 //! - `peak_rss_bytes` (`VmHWM` of `/proc/self/status`), `pipeline_state_bytes`
 //!   (`size_of::<DefaultPipeline>()`, limit 512 KiB) and `workspace_bytes`.
 
+use crate::stats::median;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
@@ -117,19 +118,6 @@ fn median_of_run_means(v: &[f64], n: usize) -> f64 {
         .map(|c| c.iter().sum::<f64>() / c.len() as f64)
         .collect();
     median(&mut means)
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// `VmHWM` of `/proc/self/status` in bytes.

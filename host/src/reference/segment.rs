@@ -163,6 +163,22 @@ pub fn box_mean(img: &GrayImage, k: u32) -> GrayImage {
     })
 }
 
+/// `[cx, cy, cov_xx, cov_yy, cov_xy]` of a non-empty pixel set (population
+/// covariance).
+fn centroid_cov(comp: &[(u32, u32)]) -> [f64; 5] {
+    let n = comp.len() as f64;
+    let mx = comp.iter().map(|q| q.0 as f64).sum::<f64>() / n;
+    let my = comp.iter().map(|q| q.1 as f64).sum::<f64>() / n;
+    let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+    for &(x, y) in comp {
+        let (dx, dy) = (x as f64 - mx, y as f64 - my);
+        a += dx * dx;
+        b += dy * dy;
+        c += dx * dy;
+    }
+    [mx, my, a / n, b / n, c / n]
+}
+
 /// Lower median of values (the ⌈n/2⌉-th smallest).
 fn lower_median(v: &mut [u32]) -> u32 {
     if v.is_empty() {
@@ -367,24 +383,15 @@ pub fn coarse_low(filtered: &GrayImage, p: &Params) -> (Vec<[f64; 5]>, u16, u16)
         {
             continue;
         }
-        let n = comp.len() as f64;
-        let mx = comp.iter().map(|q| q.0 as f64).sum::<f64>() / n;
-        let my = comp.iter().map(|q| q.1 as f64).sum::<f64>() / n;
-        let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
-        for &(x, y) in &comp {
-            let (dx, dy) = (x as f64 - mx, y as f64 - my);
-            a += dx * dx;
-            b += dy * dy;
-            c += dx * dy;
-        }
+        let [mx, my, a, b, c] = centroid_cov(&comp);
         // a low pixel X covers full pixels f·X .. f·X + f − 1
         let extra = (ff * ff - 1.0) / 12.0;
         out.push([
             ff * mx + 0.5 * (ff - 1.0),
             ff * my + 0.5 * (ff - 1.0),
-            ff * ff * a / n + extra,
-            ff * ff * b / n + extra,
-            ff * ff * c / n,
+            ff * ff * a + extra,
+            ff * ff * b + extra,
+            ff * ff * c,
         ]);
     }
     (out, t_low, t_high)
@@ -469,19 +476,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         components(&fg)
             .into_iter()
             .filter(|c| c.len() >= min_coarse)
-            .map(|comp| {
-                let n = comp.len() as f64;
-                let mx = comp.iter().map(|q| q.0 as f64).sum::<f64>() / n;
-                let my = comp.iter().map(|q| q.1 as f64).sum::<f64>() / n;
-                let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
-                for &(x, y) in &comp {
-                    let (dx, dy) = (x as f64 - mx, y as f64 - my);
-                    a += dx * dx;
-                    b += dy * dy;
-                    c += dx * dy;
-                }
-                [mx, my, a / n, b / n, c / n]
-            })
+            .map(|comp| centroid_cov(&comp))
             .collect()
     };
     let (amin, amax) = (p.area_min as usize, p.area_max as usize);

@@ -15,6 +15,7 @@
 //!
 //! Memory: allocates freely (pixel lists, cost matrices).
 
+use crate::stats::median;
 use fishtrack_core::object::Objects;
 use fishtrack_core::{Params, StereoGeometry};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -471,16 +472,6 @@ fn extent(o: &RefObject) -> (f64, f64) {
     t.sort_by(|a, b| a.total_cmp(b));
     let k = (1 + o.pixels.len() / 4096).min(16).min(t.len()).max(1);
     (t[k - 1], t[t.len() - k])
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 fn box_mean(img: &Gray, x: i64, y: i64) -> f64 {
