@@ -41,6 +41,7 @@ pub use image::{ImageView, ImageViewMut, Roi};
 pub use object::{Object, Objects, OrientedBox, Run, RunSpan};
 pub use params::Params;
 pub use segment::{segment_frame, workspace_size, SegmentError, SegmentStats};
+pub mod background;
 pub mod hist;
 pub mod label;
 pub mod lowres;

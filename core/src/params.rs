@@ -89,6 +89,22 @@ pub struct Params {
     /// seeds 1–8) but rounds the ends that the 3-D length and the tracker
     /// use (per-fish 3-D MAPE 2.8 → 3.9 %, README "Where FishTrack stands").
     pub local_smooth: u8,
+    /// Whether the local regions are thresholded on the frame minus its
+    /// smooth background (strobe glow, vignetting; beyond the paper,
+    /// `crate::background`). Applied to regions whose coarse object is
+    /// thinner than the background's opening square (the opening removed
+    /// them from the background). Default on.
+    pub background: bool,
+    /// Half-side `r` of the background's opening square, in 16-pixel
+    /// cells: the square is `(2r + 1) · 16` pixels wide (176 px at the
+    /// default 5 on a 2048-wide frame). 1 to 32.
+    pub background_radius: u8,
+    /// A component that fails the variance test of eq. (6) is kept when
+    /// its mean stands this many water σ above the water (beyond the
+    /// paper; `crate::segment::local::water_level`): a dim fish with
+    /// little texture has a small variance but a clear contrast. 0 turns
+    /// the rescue off.
+    pub contrast_sigmas: f32,
 
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
     /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
@@ -133,6 +149,9 @@ impl Default for Params {
             variance_literal: false,
             min_elongation: 2.0,
             local_smooth: 1,
+            background: true,
+            background_radius: 5,
+            contrast_sigmas: 3.0,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,
@@ -180,6 +199,7 @@ impl Params {
         self.area_min = ((self.area_min as f32 * s2) as u32).max(1);
         self.area_max = ((self.area_max as f32 * s2) as u32).max(self.area_min);
         self.margin = ((self.margin as f32 * s) as u32).max(1);
+        self.background_radius = (libm::roundf(self.background_radius as f32 * s) as u8).max(1);
         if width < 1024 {
             self.mesh_line_len = odd_at_least_3(self.mesh_line_len as f32 * s * 2.0);
             self.disk_size = odd_at_least_3(self.disk_size as f32 * s * 2.0);
@@ -213,6 +233,7 @@ impl Params {
             ("var_min", self.var_min),
             ("ellipse_scale", self.ellipse_scale),
             ("min_elongation", self.min_elongation),
+            ("contrast_sigmas", self.contrast_sigmas),
             ("v_ref_x", self.v_ref_x),
             ("v_ref_y", self.v_ref_y),
             ("alpha", self.alpha),
@@ -269,6 +290,16 @@ impl Params {
             "local_smooth",
             self.local_smooth % 2 == 1 && (1..=15).contains(&self.local_smooth),
             "odd, 1 to 15",
+        )?;
+        range(
+            "contrast_sigmas",
+            (0.0..=100.0).contains(&self.contrast_sigmas),
+            "0 to 100",
+        )?;
+        range(
+            "background_radius",
+            (1..=32).contains(&self.background_radius),
+            "1 to 32",
         )?;
         range(
             "coarse_scale",

@@ -27,6 +27,9 @@ fn main() -> Result<()> {
     let (mut paper, mut literal, mut scale1) = (false, false, false);
     let (mut var_min, mut elong): (Option<f32>, Option<f32>) = (None, None);
     let mut smooth: Option<u8> = None;
+    let mut no_bg = false;
+    let mut bg_r: Option<u8> = None;
+    let mut csig: Option<f32> = None;
     let mut out = std::env::temp_dir().join("seg_eval");
     let mut hauls = Vec::new();
     while let Some(a) = args.next() {
@@ -35,6 +38,9 @@ fn main() -> Result<()> {
             "--no-bp" => no_bp = true,
             "--no-var" => no_var = true,
             "--paper" => paper = true,
+            "--no-bg" => no_bg = true,
+            "--contrast" => csig = Some(args.next().context("--contrast K")?.parse()?),
+            "--bg-r" => bg_r = Some(args.next().context("--bg-r N")?.parse()?),
             "--literal-var" => literal = true,
             "--full-res-coarse" => scale1 = true,
             "--var-min" => var_min = Some(args.next().context("--var-min X")?.parse()?),
@@ -66,6 +72,18 @@ fn main() -> Result<()> {
             (literal, scale1) = (true, true);
             p.min_elongation = 1.0;
             p.local_smooth = 1;
+        }
+        if no_bg || paper {
+            p.background = false;
+        }
+        if let Some(c) = csig {
+            p.contrast_sigmas = c;
+        }
+        if paper {
+            p.contrast_sigmas = 0.0;
+        }
+        if let Some(r) = bg_r {
+            p.background_radius = r;
         }
         if let Some(k) = smooth {
             p.local_smooth = k;

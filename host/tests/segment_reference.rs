@@ -146,3 +146,59 @@ mod random {
         }
     }
 }
+
+/// The core's background (`fishtrack_core::background`, through its public
+/// steps) equals the reference's, pixel for pixel, on random frames with a
+/// glow, sizes that are and are not multiples of the 16-pixel cell.
+#[test]
+fn background_equals_reference_exactly() {
+    use fishtrack::reference::background::Background;
+    use fishtrack_core::background::{grid_size, open_smooth, BgGrid};
+    use fishtrack_core::image::ImageView;
+    use fishtrack_core::lowres::box_mean16;
+    for (seed, w, h, r) in [
+        (1u64, 256usize, 192usize, 3usize),
+        (2, 250, 131, 2),
+        (3, 64, 48, 5),
+        (4, 17, 300, 1),
+    ] {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let px: Vec<u8> = (0..w * h)
+            .map(|i| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                let glow = 120.0
+                    * (-((x - 0.7 * w as f64).powi(2) + (y - 0.3 * h as f64).powi(2))
+                        / (0.2 * (w * w) as f64))
+                        .exp();
+                (20.0 + glow + (s >> 60) as f64).min(255.0) as u8
+            })
+            .collect();
+        let img = GrayImage::from_raw(w as u32, h as u32, px.clone()).unwrap();
+        let reference = Background::estimate(&img, r);
+        let (bw, bh) = grid_size(w, h);
+        let (mut grid, mut tmp, mut out) = (
+            vec![0u16; bw * bh],
+            vec![0u16; bw * bh],
+            vec![0u16; bw * bh],
+        );
+        box_mean16(ImageView::packed(&px, w, h).unwrap(), 16, &mut grid).unwrap();
+        open_smooth(&mut grid, bw, bh, r, &mut tmp, &mut out).unwrap();
+        let g = BgGrid::new(&out, bw, bh).unwrap();
+        let mut diffs = 0;
+        for y in 0..h {
+            let mut row = px[y * w..(y + 1) * w].to_vec();
+            g.subtract_row(y, 0, &mut row);
+            for (x, &v) in row.iter().enumerate() {
+                let want = reference.subtract(px[y * w + x], x as u32, y as u32);
+                diffs += (v != want) as usize;
+            }
+        }
+        assert_eq!(
+            diffs, 0,
+            "seed {seed} ({w}×{h}, r {r}): {diffs} pixels differ"
+        );
+    }
+}

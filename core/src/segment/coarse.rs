@@ -52,6 +52,7 @@
 
 use super::workspace::{LowBufs, Ws, MAX_REGIONS, REGION_WORDS};
 use super::{Region, SegmentError, SegmentStats};
+use crate::background::BgGrid;
 use crate::hist::add_row_256;
 use crate::image::ImageView;
 use crate::label::{label_components, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
@@ -374,4 +375,38 @@ pub fn hysteresis_thresholds(med: u32, mad: u32) -> (u16, u16) {
             .min(u16::MAX as u32) as u16
     };
     (t(COARSE_K_LOW), t(COARSE_K_HIGH))
+}
+
+/// The background grid of the mesh-free frame `fv` ([`crate::background`],
+/// beyond the paper), in the reduced-resolution buffers of `scratch`
+/// (free once the coarse pass has its regions). With the default
+/// `coarse_scale` 4 on a frame whose sides are multiples of 16, the cell
+/// means come from the coarse pass's exact 4 × 4 block sums (no second
+/// read of the frame); otherwise from the frame directly.
+pub(crate) fn background_grid<'a>(
+    fv: ImageView<'_>,
+    params: &Params,
+    scratch: &'a mut [u8],
+) -> Result<BgGrid<'a>, SegmentError> {
+    let err = |_| SegmentError::WorkspaceTooSmall;
+    let (w, h) = (fv.width(), fv.height());
+    let (bw, bh) = crate::background::grid_size(w, h);
+    let nb = bw * bh;
+    let (lw, lh) = low_size(w, h, super::workspace::MIN_COARSE_SCALE);
+    let lb = LowBufs::carve(scratch, lw * lh).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let (grid, rest) = lb.grad.split_at_mut(nb.min(lb.grad.len()));
+    let (tmp, rest) = rest.split_at_mut(nb.min(rest.len()));
+    let out = rest.get_mut(..nb).ok_or(SegmentError::WorkspaceTooSmall)?;
+    if params.coarse_scale as usize == super::workspace::MIN_COARSE_SCALE
+        && w % crate::background::BLOCK == 0
+        && h % crate::background::BLOCK == 0
+    {
+        crate::background::grid_from_low4(lb.img, lw, bw, bh, grid).map_err(err)?;
+    } else {
+        box_mean16(fv, crate::background::BLOCK, grid)
+            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    }
+    crate::background::open_smooth(grid, bw, bh, params.background_radius as usize, tmp, out)
+        .map_err(err)?;
+    BgGrid::new(out, bw, bh).ok_or(SegmentError::WorkspaceTooSmall)
 }

@@ -41,6 +41,7 @@
 
 use super::workspace::{RoiBufs, STAT_WORDS};
 use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
+use crate::background::{BgGrid, BLOCK};
 use crate::hist::{bin_of, fold_bins_range, percentile_256, ratio_backprojection_lut_range};
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
@@ -166,6 +167,38 @@ fn view(buf: &[u8], rw: usize, rh: usize) -> Result<ImageView<'_>, SegmentError>
     ImageView::packed(buf, rw, rh).map_err(SegmentError::Image)
 }
 
+/// Median and robust σ (1.4826 · MAD, at least 1) of the levels `0..=tau`
+/// of `h` — the water, Otsu's lower class (eq. (1)).
+pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
+    let lower = h.get(..=tau as usize).unwrap_or(&[]);
+    let n: u64 = lower.iter().map(|&v| v as u64).sum();
+    if n == 0 {
+        return (tau, 1.0);
+    }
+    let half = n.div_ceil(2);
+    let (mut acc, mut med) = (0u64, 0usize);
+    for (v, &c) in lower.iter().enumerate() {
+        acc += c as u64;
+        if acc >= half {
+            med = v;
+            break;
+        }
+    }
+    let mut acc = 0u64;
+    let mut mad = 0usize;
+    for d in 0..256usize {
+        acc += lower.get(med + d).copied().unwrap_or(0) as u64;
+        if d > 0 && d <= med {
+            acc += lower.get(med - d).copied().unwrap_or(0) as u64;
+        }
+        if acc >= half {
+            mad = d;
+            break;
+        }
+    }
+    (med as u8, (1.4826 * mad as f32).max(1.0))
+}
+
 /// Clears `rec` to an empty statistics record.
 fn clear_rec(rec: &mut [u64; STAT_WORDS]) {
     *rec = [0; STAT_WORDS];
@@ -177,6 +210,7 @@ fn clear_rec(rec: &mut [u64; STAT_WORDS]) {
 pub(crate) fn segment_region<const N: usize, const R: usize>(
     frame: ImageView<'_>,
     region: &Region,
+    bg: Option<&BgGrid<'_>>,
     params: &Params,
     bufs: &mut RoiBufs<'_>,
     spans: &mut [[i32; 2]],
@@ -228,6 +262,16 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         .labels
         .get_mut(..n)
         .ok_or(SegmentError::WorkspaceTooSmall)?;
+    // the frame minus its smooth background (beyond the paper), for
+    // regions whose coarse object the background's opening removed
+    if let Some(g) = bg {
+        let side = ((2 * params.background_radius as usize + 1) * BLOCK) as f32;
+        if libm::sqrtf(3.0) * reg.b / params.ellipse_scale.max(1.0) < side {
+            for (j, row) in d.chunks_exact_mut(rw).enumerate().take(rh) {
+                g.subtract_row(roi.y as usize + j, roi.x as usize, row);
+            }
+        }
+    }
     let sv = view(d, rw, rh)?;
 
     // --- double local thresholding, eq. (1) ---
@@ -339,17 +383,21 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     }
     for j in 0..rh {
         let row = pv.row(j);
-        for (i, &p) in row.iter().enumerate().take(rw) {
+        let srow = sv.row(j);
+        for (i, (&p, &q)) in row.iter().zip(srow).enumerate().take(rw) {
             let l = labels[j * rw + i];
             if l > 0 {
                 if let Some(rec) = recs.get_mut(l as usize - 1).filter(|_| (l as usize) <= n1s) {
                     rec[0] += 1;
                     rec[10] += p as u64;
                     rec[11] += p as u64 * p as u64;
+                    rec[12] += q as u64;
                 }
             }
         }
     }
+    // the water of eq. (1)'s lower class, for the contrast test
+    let (w_med, w_sigma) = water_level(&h256, tau);
     // accepted flag in word 27
     for rec in recs.iter_mut().take(n1s) {
         let (cnt, s1, s2) = (rec[0] as f64, rec[10] as f64, rec[11] as f64);
@@ -358,7 +406,15 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         } else {
             0.0
         };
-        let ok = !params.variance_rejection || var >= stats.var_limit as f64;
+        let contrast = if cnt > 0.0 {
+            rec[12] as f64 / cnt - w_med as f64
+        } else {
+            0.0
+        };
+        let ok = !params.variance_rejection
+            || var >= stats.var_limit as f64
+            || (params.contrast_sigmas > 0.0
+                && contrast >= params.contrast_sigmas as f64 * w_sigma as f64);
         if !ok {
             stats.rejected_variance += 1;
         }

@@ -244,6 +244,11 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
     let n_regions = coarse::coarse_regions(img, params, &mut ws, &mut stats)?;
     let n = w * h;
     let frame = ImageView::packed(&ws.filtered[..n], w, h).map_err(SegmentError::Image)?;
+    let bg = if params.background && n_regions > 0 {
+        Some(coarse::background_grid(frame, params, ws.grad)?)
+    } else {
+        None
+    };
     stats.noise_sigma16 = crate::noise::noise_sigma16(img);
     stats.var_limit = local::variance_limit(params, stats.noise_sigma16);
     for rw in ws.regions.iter().take(n_regions) {
@@ -252,6 +257,7 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
         local::segment_region(
             frame,
             &region,
+            bg.as_ref(),
             params,
             &mut ws.roi,
             ws.spans,

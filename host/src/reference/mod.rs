@@ -3,6 +3,7 @@
 //! primitives. It is the yardstick `fishtrack compare` measures the core
 //! against (DESIGN.md, "Float reference").
 
+pub mod background;
 pub mod compare;
 pub mod segment;
 pub mod stereo;

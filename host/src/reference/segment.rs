@@ -17,6 +17,7 @@
 //! components per region, objects, runs). Compare only frames where the
 //! core reports no drops, shrinks or overflows.
 
+use super::background::Background;
 use fishtrack_core::Params;
 use image::{GrayImage, Luma};
 use imageproc::contrast::otsu_level;
@@ -481,6 +482,11 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
     };
     let (amin, amax) = (p.area_min as usize, p.area_max as usize);
     let smoothed = box_mean(&filtered, p.local_smooth as u32);
+    // core: `Params::background` (the frame minus its smooth background)
+    let bg = p
+        .background
+        .then(|| Background::estimate(&filtered, p.background_radius as usize));
+    let side = ((2 * p.background_radius as u32 + 1) * super::background::BLOCK) as f64;
     for &[cx, cy, ca, cb, cc] in &coarse {
         let (angle, l1, l2) = pca_of(ca, cb, cc);
         let s = p.ellipse_scale as f64;
@@ -518,8 +524,14 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         let ins: Vec<bool> = (0..rw * rh)
             .map(|i| inside(x0 + i % rw, y0 + i / rw))
             .collect();
-        // the pixels the thresholds see (core: `local_smooth`)
-        let at = |i: u32| smoothed.get_pixel(x0 + i % rw, y0 + i / rw).0[0];
+        // the pixels the thresholds see (core: `local_smooth`, then the
+        // background subtracted for regions thinner than its opening square)
+        let sub = bg.as_ref().filter(|_| 3f64.sqrt() * b / s < side);
+        let at = |i: u32| {
+            let (x, y) = (x0 + i % rw, y0 + i / rw);
+            let v = smoothed.get_pixel(x, y).0[0];
+            sub.map_or(v, |g| g.subtract(v, x, y))
+        };
         let vals: Vec<u8> = (0..rw * rh).filter(|&i| ins[i as usize]).map(at).collect();
         if vals.is_empty() || vals.len() < amin {
             continue;
@@ -611,13 +623,34 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         };
         // eq. (4)–(6)
         let roi_img = GrayImage::from_fn(rw, rh, |x, y| *filtered.get_pixel(x0 + x, y0 + y));
+        let seen = GrayImage::from_fn(rw, rh, |x, y| Luma([at(y * rw + x)]));
+        // the water (Otsu's lower class): lower median and 1.4826 · MAD
+        // (core: `local::water_level`)
+        let mut water: Vec<f64> = vals
+            .iter()
+            .filter(|&&v| v <= tau)
+            .map(|&v| v as f64)
+            .collect();
+        water.sort_by(|a, b| a.total_cmp(b));
+        let (w_med, w_sigma) = if water.is_empty() {
+            (tau as f64, 1.0)
+        } else {
+            let k = water.len().div_ceil(2) - 1;
+            let med = water[k];
+            let mut dev: Vec<f64> = water.iter().map(|v| (v - med).abs()).collect();
+            dev.sort_by(|a, b| a.total_cmp(b));
+            (med, (1.4826 * dev[k]).max(1.0))
+        };
         let mut kept = GrayImage::new(rw, rh);
         for comp in components(&bmask) {
             if comp.len() < amin || comp.len() > amax {
                 continue;
             }
             let (_, var) = mean_var(&roi_img, &comp);
-            if p.variance_rejection && var < var_limit {
+            let (seen_mean, _) = mean_var(&seen, &comp);
+            let contrast_ok =
+                p.contrast_sigmas > 0.0 && seen_mean - w_med >= p.contrast_sigmas as f64 * w_sigma;
+            if p.variance_rejection && var < var_limit && !contrast_ok {
                 continue;
             }
             for &(x, y) in &comp {
