@@ -56,36 +56,56 @@ fn round_div(s: u32, n: u32) -> u16 {
     ((2 * s + n) / (2 * n).max(1)).min(u16::MAX as u32) as u16
 }
 
-/// One pass of a 1-D window extremum of radius `r` along rows (`along_x`)
-/// or columns, cells outside the grid ignored.
-fn extremum_pass(
-    src: &[u16],
-    dst: &mut [u16],
-    bw: usize,
-    bh: usize,
-    r: usize,
-    max: bool,
-    along_x: bool,
-) {
-    for y in 0..bh {
-        for x in 0..bw {
-            let (lo, hi, fixed) = if along_x {
-                (x.saturating_sub(r), (x + r).min(bw - 1), y)
+/// Window extremum of radius `r` along each row (cells outside ignored):
+/// the row merged with itself shifted by `−r..=r`, slice by slice.
+fn extremum_rows(src: &[u16], dst: &mut [u16], bw: usize, r: usize, max: bool) {
+    for (srow, drow) in src.chunks_exact(bw).zip(dst.chunks_exact_mut(bw)) {
+        drow.copy_from_slice(srow);
+        for k in 1..=r.min(bw.saturating_sub(1)) {
+            // d[x] ⊕= s[x + k] and d[x + k] ⊕= s[x]
+            let (d_lo, s_hi) = (&mut drow[..bw - k], &srow[k..]);
+            if max {
+                d_lo.iter_mut()
+                    .zip(s_hi)
+                    .for_each(|(d, &v)| *d = (*d).max(v));
             } else {
-                (y.saturating_sub(r), (y + r).min(bh - 1), x)
-            };
-            let mut v = if max { 0u16 } else { u16::MAX };
-            for k in lo..=hi {
-                let i = if along_x {
-                    fixed * bw + k
-                } else {
-                    k * bw + fixed
-                };
-                let p = src.get(i).copied().unwrap_or(0);
-                v = if max { v.max(p) } else { v.min(p) };
+                d_lo.iter_mut()
+                    .zip(s_hi)
+                    .for_each(|(d, &v)| *d = (*d).min(v));
             }
-            if let Some(d) = dst.get_mut(y * bw + x) {
-                *d = v;
+            let (d_hi, s_lo) = (&mut drow[k..], &srow[..bw - k]);
+            if max {
+                d_hi.iter_mut()
+                    .zip(s_lo)
+                    .for_each(|(d, &v)| *d = (*d).max(v));
+            } else {
+                d_hi.iter_mut()
+                    .zip(s_lo)
+                    .for_each(|(d, &v)| *d = (*d).min(v));
+            }
+        }
+    }
+}
+
+/// Window extremum of radius `r` along each column, row slice by row
+/// slice (element-wise, vectorised).
+fn extremum_cols(src: &[u16], dst: &mut [u16], bw: usize, bh: usize, r: usize, max: bool) {
+    for (y, drow) in dst.chunks_exact_mut(bw).enumerate().take(bh) {
+        let lo = y.saturating_sub(r);
+        let hi = (y + r).min(bh - 1);
+        if let Some(first) = src.get(lo * bw..(lo + 1) * bw) {
+            drow.copy_from_slice(first);
+        }
+        for yy in lo + 1..=hi {
+            let srow = src.get(yy * bw..(yy + 1) * bw).unwrap_or(&[]);
+            if max {
+                drow.iter_mut()
+                    .zip(srow)
+                    .for_each(|(d, &v)| *d = (*d).max(v));
+            } else {
+                drow.iter_mut()
+                    .zip(srow)
+                    .for_each(|(d, &v)| *d = (*d).min(v));
             }
         }
     }
@@ -111,23 +131,34 @@ pub fn open_smooth(
     let tmp = tmp.get_mut(..n).ok_or(BgError::BufferTooSmall)?;
     let out = out.get_mut(..n).ok_or(BgError::BufferTooSmall)?;
     // erosion (separable square), then dilation
-    extremum_pass(grid, tmp, bw, bh, r, false, true);
-    extremum_pass(tmp, out, bw, bh, r, false, false);
-    extremum_pass(out, tmp, bw, bh, r, true, true);
-    extremum_pass(tmp, grid, bw, bh, r, true, false);
-    // 3 × 3 mean
-    for y in 0..bh {
-        for x in 0..bw {
-            let (mut s, mut c) = (0u32, 0u32);
-            for yy in y.saturating_sub(1)..=(y + 1).min(bh - 1) {
-                for xx in x.saturating_sub(1)..=(x + 1).min(bw - 1) {
-                    s += grid.get(yy * bw + xx).copied().unwrap_or(0) as u32;
-                    c += 1;
-                }
+    extremum_rows(grid, tmp, bw, r, false);
+    extremum_cols(tmp, out, bw, bh, r, false);
+    extremum_rows(out, tmp, bw, r, true);
+    extremum_cols(tmp, grid, bw, bh, r, true);
+    // 3 × 3 mean: horizontal sums into `tmp` (≤ 3 · 4080 fits a u16),
+    // then vertical sums divided by the number of cells inside
+    for (srow, trow) in grid.chunks_exact(bw).zip(tmp.chunks_exact_mut(bw)) {
+        for (x, t) in trow.iter_mut().enumerate() {
+            let win = srow
+                .get(x.saturating_sub(1)..(x + 2).min(bw))
+                .unwrap_or(&[]);
+            *t = win
+                .iter()
+                .map(|&v| v as u32)
+                .sum::<u32>()
+                .min(u16::MAX as u32) as u16;
+        }
+    }
+    for (y, orow) in out.chunks_exact_mut(bw).enumerate().take(bh) {
+        let (lo, hi) = (y.saturating_sub(1), (y + 1).min(bh - 1));
+        let rows = (hi - lo + 1) as u32;
+        for (x, o) in orow.iter_mut().enumerate() {
+            let cols = ((x + 1).min(bw - 1) - x.saturating_sub(1) + 1) as u32;
+            let mut s = 0u32;
+            for yy in lo..=hi {
+                s += tmp.get(yy * bw + x).copied().unwrap_or(0) as u32;
             }
-            if let Some(o) = out.get_mut(y * bw + x) {
-                *o = round_div(s, c);
-            }
+            *o = round_div(s, rows * cols);
         }
     }
     Ok(())
