@@ -497,7 +497,7 @@ fn real_state(p: &NodeState, cost: f32, c: &Cand, alpha: f32) -> NodeState {
         right: c.right,
         vel,
         vel_known: true,
-        depth: c.depth,
+        depth: c.depth.or(p.depth),
         lost: 0,
     }
 }

@@ -207,6 +207,42 @@ fn fish_lost_for_one_frame_keeps_its_id() {
     }
 }
 
+/// An unpaired view (no right object, no depth) does not erase the
+/// target's depth: the next frame's depth cue still compares against the
+/// last known depth, so a fish at another range that sits right on the
+/// prediction does not take the track.
+#[test]
+fn unpaired_view_carries_depth() {
+    let (za, zb) = (1400.0, 2500.0);
+    let mut frames = Vec::new();
+    for t in 0..4 {
+        let tf = t as f32;
+        let mut a = fish(1900.0 - 330.0 * tf, 1000.0, 400.0, 9, za, 0);
+        if t == 2 {
+            a.right = None;
+            a.depth_mm = None;
+        }
+        let mut v = std::vec![a];
+        if t == 3 {
+            // A's true view 120 px off the prediction; B (same raw size and
+            // grey levels) right on it.
+            v[0].left.cy += 120.0;
+            if let Some(r) = v[0].right.as_mut() {
+                r.cy += 120.0;
+            }
+            v.push(fish(1900.0 - 330.0 * tf, 1000.0, 400.0, 9, zb, 1));
+        }
+        frames.push(v);
+    }
+    let (log, _) = run(&frames, Assoc::Viterbi);
+    let id = log.ids_of(0, 0);
+    assert_eq!(id.len(), 1);
+    for f in 1..4 {
+        assert_eq!(log.ids_of(f, 0), id, "frame {f}: {:?}", log.frames);
+    }
+    assert!(!log.ids_of(3, 1).contains(&id[0]));
+}
+
 #[test]
 fn long_track_commits_by_depth_and_truncates_its_path() {
     // 40 frames of a slow fish: the trellis (D = 16) commits as it goes.

@@ -49,7 +49,8 @@ pub struct NodeState {
     pub vel: [f32; 2],
     /// False until the first transition of the target's path.
     pub vel_known: bool,
-    /// Depth of the last real observation on the path, mm.
+    /// Depth of the last real observation on the path that had one, mm
+    /// (an unpaired view carries its predecessor's depth).
     pub depth: Option<f32>,
     /// Consecutive predicted (lost) stages ending at this node.
     pub lost: u8,

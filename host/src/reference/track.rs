@@ -547,7 +547,7 @@ pub fn run(
                         right: c.right.clone(),
                         vel,
                         vel_known: true,
-                        depth: c.depth,
+                        depth: c.depth.or(pst.depth),
                         lost: 0,
                     },
                     Node {
