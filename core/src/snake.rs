@@ -22,8 +22,12 @@
 //! region would, it extends the body to the region's far end along the axis.
 //! The caller recomputes the end point from [`SnakeResult::far_t`].
 //!
-//! Memory bound: `SNAKE_POINTS` points and a 512-sample ring on the stack.
-//! Work: `iterations · SNAKE_POINTS · (2k+1)² · 25` pixel reads.
+//! Memory bound: `SNAKE_POINTS` points, a 512-sample ring, 8 remembered
+//! contours and a 96 × 96 window of memoised 5 × 5 box sums (18 KiB) on
+//! the stack. Work: at most `iterations · SNAKE_POINTS · (2k+1)²`
+//! candidates of 5 memoised sums each, and 25 pixel reads per distinct
+//! pixel the contour visits; a contour that repeats one of the last 8
+//! sweeps ends the loop (the final contour of a cycle is known).
 
 use crate::image::{ImageView, Roi};
 
