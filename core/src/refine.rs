@@ -71,6 +71,103 @@ pub fn grid_step_for(w: u32, h: u32, cap: usize) -> u32 {
     s as u32
 }
 
+/// The left block of side `S` at `(x0, y0)`, gathered once per block for
+/// [`block_sad`]; `None` unless the block and its copies shifted by every
+/// disparity in `[d_lo, d_hi]` lie wholly inside both views (then
+/// [`sad_per_pixel`] compares all `S²` pixels for each of them).
+fn gather_block<const S: usize>(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    x0: u32,
+    y0: u32,
+    d_lo: i32,
+    d_hi: i32,
+) -> Option<[[u8; S]; S]> {
+    let (x0l, y0l, sl) = (x0 as i64, y0 as i64, S as i64);
+    let (w, h) = (left.width() as i64, left.height() as i64);
+    let inside = y0l + sl <= h
+        && y0l + sl <= right.height() as i64
+        && x0l + sl <= w
+        && x0l >= d_hi as i64
+        && x0l + sl <= right.width() as i64 + d_lo as i64;
+    if !inside {
+        return None;
+    }
+    let mut b = [[0u8; S]; S];
+    for (j, row) in b.iter_mut().enumerate() {
+        let src = left
+            .row(y0 as usize + j)
+            .get(x0 as usize..x0 as usize + S)?;
+        row.copy_from_slice(src);
+    }
+    Some(b)
+}
+
+/// [`sad_per_pixel`] of a gathered block (see [`gather_block`]) at
+/// disparity `d`: the same sum over the same `S²` pixels, so the same value.
+fn block_sad<const S: usize>(
+    lb: &[[u8; S]; S],
+    right: &ImageView<'_>,
+    x0: u32,
+    y0: u32,
+    d: i32,
+    ops: &mut u64,
+) -> Option<f32> {
+    let xs = (x0 as i64 - d as i64) as usize;
+    let mut sum = 0u32;
+    for (j, lrow) in lb.iter().enumerate() {
+        let rrow: &[u8; S] = right
+            .row(y0 as usize + j)
+            .get(xs..xs + S)?
+            .try_into()
+            .ok()?;
+        for i in 0..S {
+            sum += lrow[i].abs_diff(rrow[i]) as u32;
+        }
+    }
+    let n = (S * S) as u64;
+    *ops += n;
+    Some(sum as f32 / n as f32)
+}
+
+/// SADs per pixel of one `bs × bs` block at `(bx0, y0)` for every
+/// disparity of `[d_lo, d_hi]`, in order, through `f(d, sad)`: the gathered
+/// fixed-size path for the common block sides when the search stays inside
+/// both views, [`sad_per_pixel`] otherwise (identical values).
+#[allow(clippy::too_many_arguments)]
+fn block_sads(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    bx0: u32,
+    y0: u32,
+    bs: u32,
+    d_lo: i32,
+    d_hi: i32,
+    ops: &mut u64,
+    mut f: impl FnMut(i32, Option<f32>),
+) {
+    macro_rules! fixed {
+        ($s:literal) => {
+            if bs == $s {
+                if let Some(lb) = gather_block::<$s>(left, right, bx0, y0, d_lo, d_hi) {
+                    for d in d_lo..=d_hi {
+                        f(d, block_sad::<$s>(&lb, right, bx0, y0, d, ops));
+                    }
+                    return;
+                }
+            }
+        };
+    }
+    fixed!(8);
+    fixed!(16);
+    for d in d_lo..=d_hi {
+        f(
+            d,
+            sad_per_pixel(left, right, bx0, bx0 + bs, y0, y0 + bs, d, ops),
+        );
+    }
+}
+
 /// Refines the disparity of one object (mask `runs`, upright box `bbox`)
 /// around the coarse disparity `d_o`.
 pub fn refine_disparity<const B: usize>(
@@ -133,20 +230,31 @@ pub fn refine_disparity<const B: usize>(
             let mut sads = [f32::INFINITY; 3];
             let mut prev = f32::INFINITY;
             let mut after_best = false;
-            for d in (d0 - range)..=(d0 + range) {
-                let s = sad_per_pixel(left, right, bx0, bx0 + bs, y0, y0 + bs, d, &mut out.sad_ops)
-                    .unwrap_or(f32::INFINITY);
-                if after_best {
-                    sads[2] = s;
-                    after_best = false;
-                }
-                if s < best.0 {
-                    best = (s, d);
-                    sads = [prev, s, f32::INFINITY];
-                    after_best = true;
-                }
-                prev = s;
-            }
+            let mut ops = 0u64;
+            block_sads(
+                left,
+                right,
+                bx0,
+                y0,
+                bs,
+                d0 - range,
+                d0 + range,
+                &mut ops,
+                |d, s| {
+                    let s = s.unwrap_or(f32::INFINITY);
+                    if after_best {
+                        sads[2] = s;
+                        after_best = false;
+                    }
+                    if s < best.0 {
+                        best = (s, d);
+                        sads = [prev, s, f32::INFINITY];
+                        after_best = true;
+                    }
+                    prev = s;
+                },
+            );
+            out.sad_ops += ops;
             if !best.0.is_finite() || best.1 == d0 - range || best.1 == d0 + range {
                 out.rejected += 1;
                 continue;
@@ -197,6 +305,33 @@ mod tests {
     fn tex(x: i32, y: i32) -> u8 {
         let h = (x.wrapping_mul(73856093) ^ y.wrapping_mul(19349663)) as u32;
         (40 + (h >> 7) % 150) as u8
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
+        /// The gathered fixed-size path gives exactly `sad_per_pixel`'s
+        /// values and operation count, inside and across the borders.
+        #[test]
+        fn block_sads_equal_sad_per_pixel(
+            w in 8usize..90, h in 8usize..40, seed in proptest::prelude::any::<u32>(),
+            bx0 in 0u32..90, y0 in 0u32..40, bs in proptest::sample::select(vec![2u32, 7, 8, 16]),
+            d_lo in -40i32..40, span in 0i32..33,
+        ) {
+            let img = |k: u32| -> Vec<u8> {
+                (0..w * h).map(|i| tex(i as i32, (seed ^ k) as i32)).collect()
+            };
+            let (l, r) = (img(0), img(0x9e37_79b9));
+            let lv = ImageView::packed(&l, w, h).unwrap();
+            let rv = ImageView::packed(&r, w, h).unwrap();
+            let (mut ops_a, mut ops_b) = (0u64, 0u64);
+            let mut got = Vec::new();
+            block_sads(&lv, &rv, bx0, y0, bs, d_lo, d_lo + span, &mut ops_a, |d, s| got.push((d, s)));
+            let want: Vec<(i32, Option<f32>)> = (d_lo..=d_lo + span)
+                .map(|d| (d, sad_per_pixel(&lv, &rv, bx0, bx0 + bs, y0, y0 + bs, d, &mut ops_b)))
+                .collect();
+            proptest::prop_assert_eq!(got, want);
+            proptest::prop_assert_eq!(ops_a, ops_b);
+        }
     }
 
     #[test]

@@ -22,13 +22,20 @@
 //! region would, it extends the body to the region's far end along the axis.
 //! The caller recomputes the end point from [`SnakeResult::far_t`].
 //!
-//! Memory bound: `SNAKE_POINTS` points and a 512-sample ring on the stack.
-//! Work: `iterations · SNAKE_POINTS · (2k+1)² · 25` pixel reads.
+//! Memory bound: `SNAKE_POINTS` points, a 512-sample ring, 8 remembered
+//! contours and a 96 × 96 window of memoised 5 × 5 box sums (18 KiB) on
+//! the stack. Work: at most `iterations · SNAKE_POINTS · (2k+1)²`
+//! candidates of 5 memoised sums each, and 25 pixel reads per distinct
+//! pixel the contour visits; a contour that repeats one of the last 8
+//! sweeps ends the loop (the final contour of a cycle is known).
 
 use crate::image::{ImageView, Roi};
 
 /// Number of contour points.
 pub const SNAKE_POINTS: usize = 32;
+
+/// Sweeps remembered to detect a contour that cycles (periods 2..=8).
+const HISTORY: usize = 8;
 
 /// Most background samples taken around the object's box.
 const RING_SAMPLES: usize = 512;
@@ -92,21 +99,87 @@ pub struct SnakeResult {
     pub sweeps: u16,
 }
 
-/// 5 × 5 box mean at `(x, y)` (replicated border).
-fn smooth(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
+/// 5 × 5 box sum at `(x, y)` (replicated border): at most 25 · 255.
+fn box_sum(img: &ImageView<'_>, x: i32, y: i32) -> u32 {
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let (xl, yl) = (x as i64, y as i64);
     let mut s = 0u32;
+    if xl >= 2 && yl >= 2 && xl + 2 < w && yl + 2 < h {
+        // wholly inside: five row slices
+        let xa = (xl - 2) as usize;
+        for yy in (yl - 2)..=(yl + 2) {
+            if let Some(r) = img.row(yy as usize).get(xa..xa + 5) {
+                for &v in r {
+                    s += v as u32;
+                }
+            }
+        }
+        return s;
+    }
     for dy in -2..=2 {
         for dx in -2..=2 {
             s += img.get_clamped((x + dx) as isize, (y + dy) as isize) as u32;
         }
     }
-    s as f32 / 25.0
+    s
 }
 
-fn grad(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
-    let gx = smooth(img, x + 1, y) - smooth(img, x - 1, y);
-    let gy = smooth(img, x, y + 1) - smooth(img, x, y - 1);
-    libm::sqrtf(gx * gx + gy * gy)
+/// Side of the square window of memoised box sums around the snake's
+/// starting circle (18 KiB of stack); sums outside it are computed afresh.
+const CACHE_SIDE: usize = 96;
+
+/// Marks a window entry not computed yet (a sum is at most 6375).
+const UNSET: u16 = u16::MAX;
+
+/// The 5 × 5 box sums the snake reads, each computed once: the greedy
+/// sweeps revisit the same pixels many times, and every energy term reads
+/// the box-smoothed image only. Values are exactly those of [`box_sum`],
+/// so the contour moves exactly as with direct reads.
+struct BoxSums<'a, 'b> {
+    img: &'a ImageView<'b>,
+    ox: i32,
+    oy: i32,
+    sums: [u16; CACHE_SIDE * CACHE_SIDE],
+}
+
+impl<'a, 'b> BoxSums<'a, 'b> {
+    /// Window centred at `(cx, cy)`.
+    fn new(img: &'a ImageView<'b>, cx: f32, cy: f32) -> Self {
+        let half = (CACHE_SIDE / 2) as f32;
+        let clampi = |v: f32| v.clamp(-1.0e7, 1.0e7) as i32;
+        BoxSums {
+            img,
+            ox: clampi(cx - half),
+            oy: clampi(cy - half),
+            sums: [UNSET; CACHE_SIDE * CACHE_SIDE],
+        }
+    }
+
+    fn sum(&mut self, x: i32, y: i32) -> u32 {
+        let i = x.wrapping_sub(self.ox) as u32 as usize;
+        let j = y.wrapping_sub(self.oy) as u32 as usize;
+        if i < CACHE_SIDE && j < CACHE_SIDE {
+            if let Some(c) = self.sums.get_mut(j * CACHE_SIDE + i) {
+                if *c == UNSET {
+                    *c = box_sum(self.img, x, y) as u16;
+                }
+                return *c as u32;
+            }
+        }
+        box_sum(self.img, x, y)
+    }
+
+    /// 5 × 5 box mean at `(x, y)` (replicated border).
+    fn smooth(&mut self, x: i32, y: i32) -> f32 {
+        self.sum(x, y) as f32 / 25.0
+    }
+
+    /// Central-difference gradient magnitude of the box mean.
+    fn grad(&mut self, x: i32, y: i32) -> f32 {
+        let gx = self.smooth(x + 1, y) - self.smooth(x - 1, y);
+        let gy = self.smooth(x, y + 1) - self.smooth(x, y - 1);
+        libm::sqrtf(gx * gx + gy * gy)
+    }
 }
 
 /// Background level around `bbox`: median and 1.4826·MAD of up to 512 pixels
@@ -238,8 +311,14 @@ pub fn tail_snake(
     }
     let reach = p.reach.clamp(1, 4) as i32;
     let (w, h) = (img.width() as f32, img.height() as f32);
+    let mut sums = BoxSums::new(img, cx, cy);
+    let limit = p.iterations.min(1000);
     let mut sweeps = 0;
-    for _ in 0..p.iterations.min(1000) {
+    // the contour after each of the last HISTORY sweeps (`hist[n % HISTORY]`
+    // holds it after sweep n; sweep 0 is the starting circle)
+    let mut hist = [[(0.0f32, 0.0f32); SNAKE_POINTS]; HISTORY];
+    hist[0] = pts;
+    for _ in 0..limit {
         sweeps += 1;
         let mut moved = 0;
         // mean spacing d̄
@@ -288,9 +367,9 @@ pub fn tail_snake(
                         continue;
                     }
                     let (qx, qy) = (q.0 as i32, q.1 as i32);
-                    let g = grad(img, qx, qy);
+                    let g = sums.grad(qx, qy);
                     gmax = gmax.max(g);
-                    let inside = if smooth(img, qx, qy) >= level {
+                    let inside = if sums.smooth(qx, qy) >= level {
                         1.0
                     } else {
                         -1.0
@@ -329,6 +408,24 @@ pub fn tail_snake(
         if moved == 0 {
             break;
         }
+        // A sweep is a function of the contour alone (the image, end and
+        // level are fixed), so once the contour repeats the one of `per`
+        // sweeps ago it cycles with period `per` for good: the contour
+        // after the last sweep is known without running the rest.
+        let n = sweeps as usize;
+        for per in 2..=HISTORY.min(n) {
+            if hist[(n - per) % HISTORY] == pts {
+                let a = n - per;
+                let k = a + (limit as usize - a) % per;
+                pts = hist[k % HISTORY];
+                sweeps = limit;
+                break;
+            }
+        }
+        if sweeps == limit {
+            break;
+        }
+        hist[n % HISTORY] = pts;
     }
     let mut res = SnakeResult {
         points: pts,
@@ -376,7 +473,7 @@ pub fn tail_snake(
             }
             n_in += 1;
             let t = (x as f32 - end.0) * ux + (y as f32 - end.1) * uy;
-            if smooth(img, x, y) >= level {
+            if sums.smooth(x, y) >= level {
                 n_hi += 1;
                 far = far.max(t);
                 near = near.min(t);
@@ -418,9 +515,71 @@ fn point_in_polygon(pts: &[(f32, f32); SNAKE_POINTS], x: f32, y: f32) -> bool {
 }
 
 #[cfg(test)]
+#[path = "snake_naive.rs"]
+mod naive;
+
+#[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// A `w × h` scene: noisy background, a bright body ending at column
+    /// `body_end` and a dimmer fin beyond it, of random extents.
+    fn random_scene(
+        w: usize,
+        h: usize,
+        seed: u64,
+        body_end: usize,
+        fin: (usize, usize, u8),
+    ) -> Vec<u8> {
+        let mut state = seed | 1;
+        let mut px = vec![0u8; w * h];
+        let cy = h / 2;
+        for y in 0..h {
+            for x in 0..w {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let noise = (state % 9) as u8;
+                let mut v = 20 + noise;
+                if x < body_end && y.abs_diff(cy) < h / 5 {
+                    v = 120 + noise;
+                } else if x >= body_end && x < body_end + fin.0 && y.abs_diff(cy) < fin.1 {
+                    v = 20u8.saturating_add(fin.2) + noise;
+                }
+                px[y * w + x] = v;
+            }
+        }
+        px
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 2 } else { 48 }))]
+        /// The memoised box sums and the cycle shortcut leave every output
+        /// (contour, sweeps, area, acceptance) exactly as the direct snake.
+        #[test]
+        fn matches_the_direct_snake(
+            w in 40usize..200, h in 40usize..200, seed in any::<u64>(),
+            body_frac in 0.2f32..0.9, fin_len in 0usize..80, fin_half in 1usize..60,
+            fin_c in 0u8..60, h_o in 4.0f32..300.0, iterations in 1u16..260,
+            fin_probe in 0.0f32..40.0, ey in -5.0f32..5.0, flip in any::<bool>(),
+        ) {
+            let body_end = ((w as f32 * body_frac) as usize).max(1);
+            let px = random_scene(w, h, seed, body_end, (fin_len, fin_half, fin_c));
+            let img = ImageView::packed(&px, w, h).unwrap();
+            let p = SnakeParams { iterations, ..SnakeParams::default() };
+            let (end, dir) = if flip {
+                ((body_end as f32 - 0.5, h as f32 / 2.0 + ey), (1.0, 0.0))
+            } else {
+                ((body_end as f32 - 0.5, h as f32 / 2.0 + ey), (-0.6, 0.8))
+            };
+            let bg = background_level(&img, Roi { x: 0, y: 0, w: body_end as u32, h: h as u32 }, 4);
+            let fast = tail_snake(&img, end, dir, h_o, 124.0, bg, fin_probe, &p);
+            let slow = naive::tail_snake_naive(&img, end, dir, h_o, 124.0, bg, fin_probe, &p);
+            prop_assert_eq!(fast, slow);
+        }
+    }
 
     /// Background 20, a "fin" of grey 30 over x ∈ [60, 80), y ∈ [40, 60)
     /// (`wide`: x ∈ [60, 90), y ∈ [30, 70)).

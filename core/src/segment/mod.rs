@@ -186,12 +186,43 @@ pub(crate) struct MaskRef<'a> {
 }
 
 impl MaskRef<'_> {
-    fn at(&self, x: u32, y: u32) -> bool {
-        if !self.roi.contains(x, y) {
-            return false;
+    /// The labels of row `y` over columns `[x0, x1)` clipped to the ROI, and
+    /// the column of the slice's first entry (empty outside the ROI).
+    fn row_span(&self, y: u32, x0: u32, x1: u32) -> (&[i32], u32) {
+        if y < self.roi.y || y >= self.roi.bottom() {
+            return (&[], x0);
         }
-        let i = (y - self.roi.y) as usize * self.roi.w as usize + (x - self.roi.x) as usize;
-        self.labels.get(i).is_some_and(|&l| l == self.label)
+        let a = x0.max(self.roi.x);
+        let b = x1.min(self.roi.right());
+        if b <= a {
+            return (&[], a);
+        }
+        let off = (y - self.roi.y) as usize * self.roi.w as usize;
+        let s = off + (a - self.roi.x) as usize;
+        let e = off + (b - self.roi.x) as usize;
+        (self.labels.get(s..e).unwrap_or(&[]), a)
+    }
+
+    /// Calls `f(x0, x1)` for every maximal run `[x0, x1)` of the mask in row
+    /// `y` within columns `[xa, xb)`, left to right.
+    fn for_runs(&self, y: u32, xa: u32, xb: u32, mut f: impl FnMut(u32, u32)) {
+        let (row, base) = self.row_span(y, xa, xb);
+        let label = self.label;
+        let mut i = 0usize;
+        while i < row.len() {
+            match row
+                .get(i..)
+                .and_then(|r| r.iter().position(|&l| l == label))
+            {
+                Some(k) => i += k,
+                None => break,
+            }
+            let start = i;
+            i += row
+                .get(i..)
+                .map_or(0, |r| r.iter().position(|&l| l != label).unwrap_or(r.len()));
+            f(base + start as u32, base + i as u32);
+        }
     }
 }
 
@@ -284,11 +315,8 @@ fn overlap(pool: &[Run], obj: &Object, mask: &MaskRef<'_>) -> u32 {
         if y < mask.roi.y || y >= mask.roi.bottom() {
             continue;
         }
-        let x0 = (r.x0 as u32).max(mask.roi.x);
-        let x1 = (r.x1 as u32).min(mask.roi.right());
-        for x in x0..x1 {
-            n += mask.at(x, y) as u32;
-        }
+        let (row, _) = mask.row_span(y, r.x0 as u32, r.x1 as u32);
+        n += row.iter().filter(|&&l| l == mask.label).count() as u32;
     }
     n
 }
@@ -366,14 +394,7 @@ pub(crate) fn emit<const N: usize, const R: usize>(
     // runs of the candidate
     let mut n_runs = 0usize;
     for y in bbox.y..bbox.bottom() {
-        let mut inside = false;
-        for x in bbox.x..bbox.right() {
-            let v = mask.at(x, y);
-            if v && !inside {
-                n_runs += 1;
-            }
-            inside = v;
-        }
+        mask.for_runs(y, bbox.x, bbox.right(), |_, _| n_runs += 1);
     }
     // capacity: objects
     if out.items.len() >= N {
@@ -412,15 +433,10 @@ pub(crate) fn emit<const N: usize, const R: usize>(
     let (mut umin, mut umax, mut vmin, mut vmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
     let start = out.runs.len();
     for y in bbox.y..bbox.bottom() {
-        let mut x = bbox.x;
-        while x < bbox.right() {
-            if !mask.at(x, y) {
-                x += 1;
-                continue;
-            }
-            let x0 = x;
-            while x < bbox.right() && mask.at(x, y) {
-                x += 1;
+        let mut full = false;
+        mask.for_runs(y, bbox.x, bbox.right(), |x0, x| {
+            if full {
+                return;
             }
             let run = Run {
                 y: y as u16,
@@ -428,7 +444,8 @@ pub(crate) fn emit<const N: usize, const R: usize>(
                 x1: x as u16,
             };
             if out.runs.push(run).is_err() {
-                break; // cannot happen: room was made above
+                full = true; // cannot happen: room was made above
+                return;
             }
             for (px, py) in [
                 (x0 as f32 - 0.5, y as f32 - 0.5),
@@ -444,7 +461,7 @@ pub(crate) fn emit<const N: usize, const R: usize>(
                 vmin = vmin.min(v);
                 vmax = vmax.max(v);
             }
-        }
+        });
     }
     let (um, vm) = (0.5 * (umin + umax), 0.5 * (vmin + vmax));
     let obb = long_axis_first(OrientedBox {
