@@ -251,14 +251,19 @@ pub fn axis_extent(
         }
         let base = (r.y as f32 - cy) * uy - cx * ux;
         let len = r.len() as usize;
-        // along a run t is monotonic: only its k first and k last pixels matter
-        let take = len.min(k);
-        for i in 0..take {
-            for x in [r.x0 as usize + i, r.x1 as usize - 1 - i] {
-                let t = base + x as f32 * ux;
-                insert_lo(&mut lo, k, t);
-                insert_hi(&mut hi, k, t);
-            }
+        // along a run t is monotonic: only its k first and k last pixels
+        // matter (each pixel counted once: a run of at most 2k pixels is
+        // taken whole, not its overlapping head and tail twice)
+        let x0 = r.x0 as usize;
+        let (head, tail_from) = if len <= 2 * k {
+            (len, len)
+        } else {
+            (k, len - k)
+        };
+        for x in (x0..x0 + head).chain(x0 + tail_from..x0 + len) {
+            let t = base + x as f32 * ux;
+            insert_lo(&mut lo, k, t);
+            insert_hi(&mut hi, k, t);
         }
         n += len;
     }
@@ -756,6 +761,44 @@ mod tests {
         // rank 11: the 11th extreme pixel is in the next column
         let (lo, hi) = axis_extent(&runs, 24.5, 14.5, 1.0, 0.0, 11).unwrap();
         assert_eq!((lo, hi), (-18.5, 18.5));
+    }
+
+    #[test]
+    fn axis_extent_counts_short_runs_once() {
+        // a one-pixel-wide vertical line: every run is shorter than 2k
+        let runs: Vec<Run> = (0..10).map(|y| Run { y, x0: 7, x1: 8 }).collect();
+        // rank 3 from each end along +y: rows 2 and 7 (centre 4.5)
+        let (lo, hi) = axis_extent(&runs, 7.0, 4.5, 0.0, 1.0, 3).unwrap();
+        assert_eq!((lo, hi), (-2.5, 2.5));
+    }
+
+    proptest::proptest! {
+        /// The rank-k extremes equal those of all mask pixels sorted (the
+        /// float reference's definition, `reference::stereo::extent`).
+        #[test]
+        fn axis_extent_matches_sorting_every_pixel(
+            rows in proptest::collection::vec((0u16..60, 1u16..40), 1..30),
+            angle in -3.2f32..3.2,
+            k in 1usize..=16,
+        ) {
+            let runs: Vec<Run> = rows
+                .iter()
+                .enumerate()
+                .map(|(y, &(x0, n))| Run { y: y as u16, x0, x1: x0 + n })
+                .collect();
+            let (ux, uy) = (libm::cosf(angle), libm::sinf(angle));
+            let (cx, cy) = (30.0f32, 12.0f32);
+            let mut all: Vec<f32> = runs
+                .iter()
+                .flat_map(|r| (r.x0..r.x1).map(move |x| (x, r.y)))
+                .map(|(x, y)| (y as f32 - cy) * uy - cx * ux + x as f32 * ux)
+                .collect();
+            all.sort_by(|a, b| a.total_cmp(b));
+            let kk = k.min(all.len());
+            let (lo, hi) = axis_extent(&runs, cx, cy, ux, uy, k).unwrap();
+            proptest::prop_assert_eq!(lo, all[kk - 1]);
+            proptest::prop_assert_eq!(hi, all[all.len() - kk]);
+        }
     }
 
     #[test]

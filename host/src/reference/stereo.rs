@@ -657,8 +657,10 @@ fn snake(
 }
 
 /// Mean of the `side × side` square centred `side/2 + 1` pixels beyond
-/// `end` along `u` (as `core::snake::end_probe`).
-fn probe(img: &Gray, end: (f64, f64), u: (f64, f64), side: i64) -> Option<f64> {
+/// `end` along `u` (as `core::snake::end_probe`), as the core rounds it
+/// (`sum as f32 / n as f32`; the sum of ≤ 256² bytes is exact in f32), so
+/// the probe gate decides on the same numbers in both implementations.
+fn probe(img: &Gray, end: (f64, f64), u: (f64, f64), side: i64) -> Option<f32> {
     let side = side.clamp(1, 256);
     let off = side as f64 * 0.5 + 1.0;
     let x0 = (end.0 + u.0 * off).round() as i64 - side / 2;
@@ -672,7 +674,7 @@ fn probe(img: &Gray, end: (f64, f64), u: (f64, f64), side: i64) -> Option<f64> {
             }
         }
     }
-    (n > 0 && 2 * n >= side * side).then(|| sum / n as f64)
+    (n > 0 && 2 * n >= side * side).then(|| sum as f32 / n as f32)
 }
 
 fn dist(a: (f64, f64), b: (f64, f64)) -> f64 {
@@ -790,14 +792,20 @@ pub fn length(
         // the probe gate: something brighter than the background continues
         // past the end in both views
         let pside = ((h_o * 0.5) as i64).max(3);
-        let pl = probe(l, end, (s * u.0, s * u.1), pside).map_or(0.0, |m| m - bg.0);
-        let pr = probe(r, re, (rs * ru.0, rs * ru.1), pside).map_or(0.0, |m| m - rbg.0);
-        let gate = (cfg.probe_noise_k as f64 * bg.1)
-            .max(cfg.probe_body_fraction as f64 * (lo.mean - bg.0))
+        // a threshold decision, so in the core's f32 arithmetic on the same
+        // integers (median, MAD, probe sum) and the same f32 body mean: a
+        // probe a rounding error from the gate goes the same way in both
+        let sigma = 1.4826f32 * (bg.1 / 1.4826).round() as f32;
+        let contrast = lo.mean as f32 - bg.0 as f32;
+        let pl = probe(l, end, (s * u.0, s * u.1), pside).map_or(0.0, |m| m - bg.0 as f32);
+        let pr = probe(r, re, (rs * ru.0, rs * ru.1), pside).map_or(0.0, |m| m - rbg.0 as f32);
+        let gate = (cfg.probe_noise_k * sigma)
+            .max(cfg.probe_body_fraction * contrast)
             .max(1.0);
-        let ceiling = cfg.probe_max_body_fraction as f64 * (lo.mean - bg.0);
+        let ceiling = cfg.probe_max_body_fraction * contrast;
         let probed =
             !cfg.probe_gate || (pl >= gate && pr >= gate && pl <= ceiling && pr <= ceiling);
+        let (pl, pr) = (pl as f64, pr as f64);
         let (fl, fr) = if cfg.probe_gate && !flagged {
             (pl, pr)
         } else {
