@@ -246,21 +246,58 @@ impl<'a> BgGrid<'a> {
     }
 
     /// Replaces the pixels `px` of frame row `y` starting at column `x0`
-    /// by `clamp(p − round(B) + OFFSET, 0, 255)`, `B` the background.
+    /// by `clamp(p − round(B) + OFFSET, 0, 255)`, `B` the background
+    /// ([`BgGrid::at16`] rounded to a grey level).
+    ///
+    /// Cost: the row is walked cell interval by cell interval; inside one
+    /// the weight steps by 2/32 per pixel, so a pixel costs two multiplies,
+    /// two shifts and the clamp (no division, no lookup).
     pub fn subtract_row(&self, y: usize, x0: usize, px: &mut [u8]) {
         let (y0, y1, wy) = axis(y, self.bh);
-        let mut last = (usize::MAX, usize::MAX);
-        let (mut a, mut b) = (0u32, 0u32);
-        for (i, p) in px.iter_mut().enumerate() {
-            let (c0, c1, wx) = axis(x0 + i, self.bw);
-            if (c0, c1) != last {
-                a = self.cell(c0, y0) * (32 - wy) + self.cell(c0, y1) * wy;
-                b = self.cell(c1, y0) * (32 - wy) + self.cell(c1, y1) * wy;
-                last = (c0, c1);
+        // the grid column `c` interpolated to row y, times 32
+        let col = |c: usize| self.cell(c, y0) * (32 - wy) + self.cell(c, y1) * wy;
+        let put = |p: &mut u8, v: u32| {
+            let bg = (((v + 512) >> 10) + 8) >> 4;
+            *p = (*p as i32 - bg as i32 + OFFSET).clamp(0, 255) as u8;
+        };
+        let n = self.bw;
+        let len = px.len();
+        // position in half pixels from cell 0's centre (see `axis`)
+        let mut pos = 2 * x0 as i64 + 1 - BLOCK as i64;
+        let mut i = 0usize;
+        if n < 2 || pos <= 0 {
+            // left of the first centre (or a one-cell grid): cell 0
+            let k = if n < 2 {
+                len
+            } else {
+                ((-pos / 2 + 1) as usize).min(len)
+            };
+            let v = col(0) * 32;
+            px.iter_mut().take(k).for_each(|p| put(p, v));
+            i = k;
+            pos += 2 * k as i64;
+        }
+        let span = 2 * BLOCK as i64;
+        while i < len {
+            let c = (pos / span) as usize;
+            if c + 1 >= n {
+                let v = col(n - 1) * 32;
+                px.iter_mut().skip(i).for_each(|p| put(p, v));
+                break;
             }
-            let bg16 = (a * (32 - wx) + b * wx + 512) >> 10;
-            let bg = ((bg16 + 8) >> 4) as i32;
-            *p = (*p as i32 - bg + OFFSET).clamp(0, 255) as u8;
+            let (a, b) = (col(c), col(c + 1));
+            let w = (pos % span) as u32; // 32nds; steps by 2 per pixel
+            let k = ((33 - w) / 2).max(1) as usize; // w, w + 2, …, ≤ 31
+            let end = (i + k).min(len);
+            // a·(32 − w) + b·w, stepped by 2 (b − a) per pixel
+            let mut v = (a * (32 - w) + b * w) as i64;
+            let step = 2 * (b as i64 - a as i64);
+            for p in px.get_mut(i..end).unwrap_or(&mut []) {
+                put(p, v as u32);
+                v += step;
+            }
+            pos += 2 * (end - i) as i64;
+            i = end;
         }
     }
 }

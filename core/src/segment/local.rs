@@ -243,7 +243,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     let spans = spans.get_mut(..rh).ok_or(SegmentError::WorkspaceTooSmall)?;
     ellipse_spans(&reg, roi, spans);
     let pv = frame.sub(roi).map_err(SegmentError::Image)?;
-    let inside = |sp: &[i32; 2], i: usize| (i as i32) >= sp[0] && (i as i32) < sp[1];
+    // the columns of row j inside the ellipse (spans are within the ROI)
+    let span = |sp: &[i32; 2]| (sp[0].max(0) as usize).min(rw)..(sp[1].max(0) as usize).min(rw);
     let a = bufs.a.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
     let b = bufs.b.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
     let c = bufs.c.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
@@ -267,8 +268,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     if let Some(g) = bg {
         let side = ((2 * params.background_radius as usize + 1) * BLOCK) as f32;
         if libm::sqrtf(3.0) * reg.b / params.ellipse_scale.max(1.0) < side {
-            for (j, row) in d.chunks_exact_mut(rw).enumerate().take(rh) {
-                g.subtract_row(roi.y as usize + j, roi.x as usize, row);
+            // only the ellipse's pixels are ever read from `d`
+            for (j, (row, sp)) in d.chunks_exact_mut(rw).zip(spans.iter()).enumerate() {
+                let r = span(sp);
+                let x0 = roi.x as usize + r.start;
+                if let Some(part) = row.get_mut(r) {
+                    g.subtract_row(roi.y as usize + j, x0, part);
+                }
             }
         }
     }
@@ -311,12 +317,15 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         t_high,
     });
     for (j, sp) in spans.iter().enumerate() {
-        let row = sv.row(j);
+        let r = span(sp);
+        let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
         let (ra, rb) = (&mut a[j * rw..(j + 1) * rw], &mut b[j * rw..(j + 1) * rw]);
-        for (i, &p) in row.iter().enumerate().take(rw) {
-            let ins = inside(sp, i);
-            ra[i] = if ins && p > t_low { 255 } else { 0 };
-            rb[i] = if ins && p > t_high { 255 } else { 0 };
+        ra.fill(0);
+        rb.fill(0);
+        let (ra, rb) = (&mut ra[r.clone()], &mut rb[r]);
+        for ((&p, va), vb) in row.iter().zip(ra.iter_mut()).zip(rb.iter_mut()) {
+            *va = if p > t_low { 255 } else { 0 };
+            *vb = if p > t_high { 255 } else { 0 };
         }
     }
     // 3 × 3 median on both masks (M_low into `c`, M_high into `a`),
@@ -324,23 +333,28 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     median3_binary(view(a, rw, rh)?, c).map_err(|_| SegmentError::WorkspaceTooSmall)?;
     median3_binary(view(b, rw, rh)?, a).map_err(|_| SegmentError::WorkspaceTooSmall)?;
     for (j, sp) in spans.iter().enumerate() {
-        for i in 0..rw {
-            if !inside(sp, i) {
-                c[j * rw + i] = 0;
-                a[j * rw + i] = 0;
-            }
-        }
+        let r = span(sp);
+        let (rc, ra) = (&mut c[j * rw..(j + 1) * rw], &mut a[j * rw..(j + 1) * rw]);
+        rc[..r.start].fill(0);
+        ra[..r.start].fill(0);
+        rc[r.end..].fill(0);
+        ra[r.end..].fill(0);
     }
 
     // --- histogram backprojection, eq. (2)–(3): B into `b` ---
     if params.double_threshold && params.backprojection {
         let (mut hl, mut hh) = ([0u32; 256], [0u32; 256]);
-        for j in 0..rh {
-            let row = sv.row(j);
-            for (i, &p) in row.iter().enumerate().take(rw) {
-                let k = j * rw + i;
-                hl[p as usize] += (c[k] != 0) as u32;
-                hh[p as usize] += (a[k] != 0) as u32;
+        // (both masks are 0 outside the ellipse)
+        for (j, sp) in spans.iter().enumerate() {
+            let r = span(sp);
+            let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
+            let (rc, ra) = (
+                &c[j * rw..(j + 1) * rw][r.clone()],
+                &a[j * rw..(j + 1) * rw][r],
+            );
+            for ((&p, &vc), &va) in row.iter().zip(rc).zip(ra) {
+                hl[p as usize] += (vc != 0) as u32;
+                hh[p as usize] += (va != 0) as u32;
             }
         }
         let bins = (params.hist_bins as usize).clamp(1, 256);
@@ -351,13 +365,12 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         fold_bins_range(&hh, lo, hi, &mut bh[..bins]);
         let lut = ratio_backprojection_lut_range(&bh[..bins], &bl[..bins], lo, hi, params.theta_bp);
         for (j, sp) in spans.iter().enumerate() {
-            let row = sv.row(j);
-            for (i, &p) in row.iter().enumerate().take(rw) {
-                b[j * rw + i] = if inside(sp, i) && lut[p as usize] {
-                    255
-                } else {
-                    0
-                };
+            let r = span(sp);
+            let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
+            let rb = &mut b[j * rw..(j + 1) * rw];
+            rb.fill(0);
+            for (&p, vb) in row.iter().zip(&mut rb[r]) {
+                *vb = if lut[p as usize] { 255 } else { 0 };
             }
         }
     } else {
@@ -381,11 +394,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     for rec in recs.iter_mut().take(n1s) {
         clear_rec(rec);
     }
-    for j in 0..rh {
-        let row = pv.row(j);
-        let srow = sv.row(j);
-        for (i, (&p, &q)) in row.iter().zip(srow).enumerate().take(rw) {
-            let l = labels[j * rw + i];
+    // (labels are 0 outside the ellipse: B is)
+    for (j, sp) in spans.iter().enumerate() {
+        let r = span(sp);
+        let row = pv.row(j).get(r.clone()).unwrap_or(&[]);
+        let srow = sv.row(j).get(r.clone()).unwrap_or(&[]);
+        let lrow = &labels[j * rw..(j + 1) * rw][r];
+        for ((&p, &q), &l) in row.iter().zip(srow).zip(lrow) {
             if l > 0 {
                 if let Some(rec) = recs.get_mut(l as usize - 1).filter(|_| (l as usize) <= n1s) {
                     rec[0] += 1;
@@ -420,18 +435,25 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         }
         rec[STAT_WORDS - 1] = ok as u64;
     }
-    let mut any = false;
-    for (bv, &l) in a.iter_mut().zip(labels.iter()) {
-        let keep = l > 0
-            && (l as usize) <= n1s
-            && recs
-                .get(l as usize - 1)
-                .is_some_and(|r| r[STAT_WORDS - 1] == 1);
-        *bv = if keep { 255 } else { 0 };
-        any |= keep;
+    // accepted labels as a table (index = label; 0 and overflow rejected)
+    let mut acc = [0u8; super::MAX_ROI_COMPONENTS + 1];
+    for (k, rec) in recs.iter().enumerate().take(n1s) {
+        if let Some(v) = acc.get_mut(k + 1) {
+            *v = if rec[STAT_WORDS - 1] == 1 { 255 } else { 0 };
+        }
     }
-    if !any {
+    if !acc.iter().any(|&v| v != 0) {
         return Ok(());
+    }
+    // (labels are 0 outside the ellipse)
+    for (j, sp) in spans.iter().enumerate() {
+        let r = span(sp);
+        let ra = &mut a[j * rw..(j + 1) * rw];
+        ra.fill(0);
+        let lrow = &labels[j * rw..(j + 1) * rw][r.clone()];
+        for (bv, &l) in ra[r].iter_mut().zip(lrow) {
+            *bv = acc.get(l.max(0) as usize).copied().unwrap_or(0);
+        }
     }
 
     // --- post-processing, Section III.D: closing then opening ---
