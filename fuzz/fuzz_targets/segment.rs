@@ -115,6 +115,10 @@ fuzz_target!(|data: &[u8]| {
     p.coarse_scale = b.u8v(p.coarse_scale);
     p.variance_literal = b.boolv(p.variance_literal);
     p.min_elongation = b.f32(p.min_elongation);
+    p.background = b.boolv(p.background);
+    p.background_radius = b.u8v(p.background_radius);
+    p.contrast_sigmas = b.f32(p.contrast_sigmas);
+    p.local_smooth = b.u8v(p.local_smooth);
 
     // Pixels: the rest of the input, cycled; a flat grey frame when empty.
     let pixels = b.0;
