@@ -56,6 +56,15 @@ fn round_div(s: u32, n: u32) -> u16 {
     ((2 * s + n) / (2 * n).max(1)).min(u16::MAX as u32) as u16
 }
 
+/// `d[i] = max(d[i], s[i])` (or the minimum) over the common length.
+fn merge(d: &mut [u16], s: &[u16], max: bool) {
+    if max {
+        d.iter_mut().zip(s).for_each(|(d, &v)| *d = (*d).max(v));
+    } else {
+        d.iter_mut().zip(s).for_each(|(d, &v)| *d = (*d).min(v));
+    }
+}
+
 /// Window extremum of radius `r` along each row (cells outside ignored):
 /// the row merged with itself shifted by `−r..=r`, slice by slice.
 fn extremum_rows(src: &[u16], dst: &mut [u16], bw: usize, r: usize, max: bool) {
@@ -63,26 +72,8 @@ fn extremum_rows(src: &[u16], dst: &mut [u16], bw: usize, r: usize, max: bool) {
         drow.copy_from_slice(srow);
         for k in 1..=r.min(bw.saturating_sub(1)) {
             // d[x] ⊕= s[x + k] and d[x + k] ⊕= s[x]
-            let (d_lo, s_hi) = (&mut drow[..bw - k], &srow[k..]);
-            if max {
-                d_lo.iter_mut()
-                    .zip(s_hi)
-                    .for_each(|(d, &v)| *d = (*d).max(v));
-            } else {
-                d_lo.iter_mut()
-                    .zip(s_hi)
-                    .for_each(|(d, &v)| *d = (*d).min(v));
-            }
-            let (d_hi, s_lo) = (&mut drow[k..], &srow[..bw - k]);
-            if max {
-                d_hi.iter_mut()
-                    .zip(s_lo)
-                    .for_each(|(d, &v)| *d = (*d).max(v));
-            } else {
-                d_hi.iter_mut()
-                    .zip(s_lo)
-                    .for_each(|(d, &v)| *d = (*d).min(v));
-            }
+            merge(&mut drow[..bw - k], &srow[k..], max);
+            merge(&mut drow[k..], &srow[..bw - k], max);
         }
     }
 }
@@ -97,16 +88,7 @@ fn extremum_cols(src: &[u16], dst: &mut [u16], bw: usize, bh: usize, r: usize, m
             drow.copy_from_slice(first);
         }
         for yy in lo + 1..=hi {
-            let srow = src.get(yy * bw..(yy + 1) * bw).unwrap_or(&[]);
-            if max {
-                drow.iter_mut()
-                    .zip(srow)
-                    .for_each(|(d, &v)| *d = (*d).max(v));
-            } else {
-                drow.iter_mut()
-                    .zip(srow)
-                    .for_each(|(d, &v)| *d = (*d).min(v));
-            }
+            merge(drow, src.get(yy * bw..(yy + 1) * bw).unwrap_or(&[]), max);
         }
     }
 }
