@@ -394,8 +394,15 @@ pub(crate) fn background_grid<'a>(
     let nb = bw * bh;
     let (lw, lh) = low_size(w, h, super::workspace::MIN_COARSE_SCALE);
     let lb = LowBufs::carve(scratch, lw * lh).ok_or(SegmentError::WorkspaceTooSmall)?;
-    let (grid, rest) = lb.grad.split_at_mut(nb.min(lb.grad.len()));
-    let (tmp, rest) = rest.split_at_mut(nb.min(rest.len()));
+    // every reduced-resolution buffer has `lw · lh ≥ bw · bh` entries (a
+    // 16-pixel cell covers whole 4-pixel cells), so the grid fits the
+    // gradient's place and its two scratch grids the labels' (i32 = 2 × u16)
+    let grid = lb
+        .grad
+        .get_mut(..nb)
+        .ok_or(SegmentError::WorkspaceTooSmall)?;
+    let lab16: &mut [u16] = bytemuck::cast_slice_mut(lb.labels);
+    let (tmp, rest) = lab16.split_at_mut(nb.min(lab16.len()));
     let out = rest.get_mut(..nb).ok_or(SegmentError::WorkspaceTooSmall)?;
     if params.coarse_scale as usize == super::workspace::MIN_COARSE_SCALE
         && w % crate::background::BLOCK == 0

@@ -470,3 +470,34 @@ fn full_size_stage_times() {
         t4 - t3
     );
 }
+
+/// Every small frame size, at every coarse scale, with the background on:
+/// the background grid must fit the workspace `workspace_size` promises
+/// (a 2 × 17 frame once asked for more cells than the reduced-resolution
+/// buffers held).
+#[test]
+#[cfg_attr(miri, ignore)] // 2 240 segmentations: too slow to interpret
+fn background_grid_fits_every_small_frame() {
+    for scale in [1u8, 4, 7, 16] {
+        for w in 1..=40usize {
+            for h in (1..=40usize).step_by(3) {
+                let img: Vec<u8> = (0..w * h).map(|i| (i * 7 % 251) as u8).collect();
+                let p = Params {
+                    coarse_scale: scale,
+                    area_min: 1,
+                    mesh_line_len: 1,
+                    ..Params::default()
+                };
+                let mut ws = vec![0u8; workspace_size(w, h, 0)];
+                let mut out: Objects<8, 256> = Objects::new();
+                let r = segment_frame(
+                    ImageView::packed(&img, w, h).unwrap(),
+                    &p,
+                    &mut ws,
+                    &mut out,
+                );
+                assert!(r.is_ok(), "{w}×{h}, coarse_scale {scale}: {r:?}");
+            }
+        }
+    }
+}
