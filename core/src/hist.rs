@@ -142,6 +142,38 @@ pub fn percentile_256(hist: &[u32; 256], pct: u32) -> u8 {
     255
 }
 
+/// Lower median (the ⌈n/2⌉-th smallest) of a histogram's values: the
+/// first bin where the running count reaches half; the last bin when the
+/// histogram is empty.
+pub fn median(hist: &[u32]) -> usize {
+    let total: u64 = hist.iter().map(|&h| h as u64).sum();
+    let half = total.div_ceil(2).max(1);
+    let mut acc = 0u64;
+    for (i, &c) in hist.iter().enumerate() {
+        acc += c as u64;
+        if acc >= half {
+            return i;
+        }
+    }
+    hist.len().saturating_sub(1)
+}
+
+/// Median and median absolute deviation (both lower medians, [`median`])
+/// of a histogram's values; `dev` is caller scratch, as long as `hist`
+/// (deviations beyond it count in its last bin).
+pub fn median_mad(hist: &[u32], dev: &mut [u32]) -> (usize, usize) {
+    let bins = hist.len().min(dev.len());
+    let (hist, dev) = (&hist[..bins], &mut dev[..bins]);
+    dev.fill(0);
+    let med = median(hist);
+    for (i, &c) in hist.iter().enumerate() {
+        if let Some(d) = dev.get_mut(i.abs_diff(med).min(bins.saturating_sub(1))) {
+            *d = d.saturating_add(c);
+        }
+    }
+    (med, median(dev))
+}
+
 /// [`fold_bins`] with the bins spanning `[lo, hi]` ([`range_bin`]).
 pub fn fold_bins_range(hist: &[u32; 256], lo: u8, hi: u8, out: &mut [u32]) {
     out.fill(0);
@@ -236,6 +268,25 @@ mod tests {
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 128 }))]
+        /// Median and MAD of a histogram equal the lower medians of the
+        /// sorted values and of their sorted absolute deviations.
+        #[test]
+        fn median_mad_equals_sorting(vals in proptest::collection::vec(0u8..64, 1..300)) {
+            extern crate std;
+            use std::vec::Vec;
+            let mut h = [0u32; 64];
+            for &v in &vals {
+                h[v as usize] += 1;
+            }
+            let mut sorted = vals.clone();
+            sorted.sort_unstable();
+            let k = sorted.len().div_ceil(2) - 1;
+            let med = sorted[k] as usize;
+            let mut dev: Vec<usize> = sorted.iter().map(|&v| (v as usize).abs_diff(med)).collect();
+            dev.sort_unstable();
+            proptest::prop_assert_eq!(median_mad(&h, &mut [0u32; 64]), (med, dev[k]));
+        }
+
         /// The two-counter histogram equals a naive count, for rows shorter
         /// and longer than the split threshold, odd and even lengths.
         #[test]

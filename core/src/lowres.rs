@@ -254,20 +254,6 @@ pub fn gradient_disk_u16(
     Ok(())
 }
 
-/// Lower median (the ⌈n/2⌉-th smallest) of a histogram's values.
-fn hist_median(hist: &[u32]) -> usize {
-    let total: u64 = hist.iter().map(|&h| h as u64).sum();
-    let half = total.div_ceil(2).max(1);
-    let mut acc = 0u64;
-    for (i, &c) in hist.iter().enumerate() {
-        acc += c as u64;
-        if acc >= half {
-            return i;
-        }
-    }
-    hist.len().saturating_sub(1)
-}
-
 /// Median and MAD (both lower medians) of `values`, each clamped to
 /// `hist.len() − 1`; `hist` and `dev` are caller scratch of equal length
 /// (values above the last bin count as the last bin, which leaves both
@@ -279,7 +265,6 @@ pub fn median_mad_u16(values: &[u16], hist: &mut [u32], dev: &mut [u32]) -> (u32
     }
     let (hist, dev) = (&mut hist[..bins], &mut dev[..bins]);
     hist.fill(0);
-    dev.fill(0);
     // (counts cannot wrap: fewer than 2³² values reach one bin for any
     // frame a u16 run can describe)
     let last = bins - 1;
@@ -287,13 +272,8 @@ pub fn median_mad_u16(values: &[u16], hist: &mut [u32], dev: &mut [u32]) -> (u32
         let c = &mut hist[(v as usize).min(last)];
         *c = c.wrapping_add(1);
     }
-    let med = hist_median(hist);
-    for (i, &c) in hist.iter().enumerate() {
-        if let Some(d) = dev.get_mut(i.abs_diff(med).min(bins - 1)) {
-            *d = d.saturating_add(c);
-        }
-    }
-    (med as u32, hist_median(dev) as u32)
+    let (med, mad) = crate::hist::median_mad(hist, dev);
+    (med as u32, mad as u32)
 }
 
 #[cfg(test)]

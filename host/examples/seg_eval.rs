@@ -67,19 +67,18 @@ fn main() -> Result<()> {
         if let Some(b) = bins {
             p.hist_bins = b;
         }
+        if let Some(c) = csig {
+            p.contrast_sigmas = c;
+        }
+        if no_bg {
+            p.background = false;
+        }
         if paper {
             // the paper's pipeline: no step beyond Section III
             (literal, scale1) = (true, true);
             p.min_elongation = 1.0;
             p.local_smooth = 1;
-        }
-        if no_bg || paper {
             p.background = false;
-        }
-        if let Some(c) = csig {
-            p.contrast_sigmas = c;
-        }
-        if paper {
             p.contrast_sigmas = 0.0;
         }
         if let Some(r) = bg_r {

@@ -42,7 +42,9 @@
 use super::workspace::{RoiBufs, STAT_WORDS};
 use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
 use crate::background::{BgGrid, BLOCK};
-use crate::hist::{bin_of, fold_bins_range, percentile_256, ratio_backprojection_lut_range};
+use crate::hist::{
+    bin_of, fold_bins_range, median_mad, percentile_256, ratio_backprojection_lut_range,
+};
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
 use crate::morph::{close_disk_in_place, median3_binary, open_disk_in_place, Disk};
@@ -171,31 +173,10 @@ fn view(buf: &[u8], rw: usize, rh: usize) -> Result<ImageView<'_>, SegmentError>
 /// of `h` — the water, Otsu's lower class (eq. (1)).
 pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
     let lower = h.get(..=tau as usize).unwrap_or(&[]);
-    let n: u64 = lower.iter().map(|&v| v as u64).sum();
-    if n == 0 {
+    if lower.iter().all(|&v| v == 0) {
         return (tau, 1.0);
     }
-    let half = n.div_ceil(2);
-    let (mut acc, mut med) = (0u64, 0usize);
-    for (v, &c) in lower.iter().enumerate() {
-        acc += c as u64;
-        if acc >= half {
-            med = v;
-            break;
-        }
-    }
-    let mut acc = 0u64;
-    let mut mad = 0usize;
-    for d in 0..256usize {
-        acc += lower.get(med + d).copied().unwrap_or(0) as u64;
-        if d > 0 && d <= med {
-            acc += lower.get(med - d).copied().unwrap_or(0) as u64;
-        }
-        if acc >= half {
-            mad = d;
-            break;
-        }
-    }
+    let (med, mad) = median_mad(lower, &mut [0u32; 256]);
     (med as u8, (1.4826 * mad as f32).max(1.0))
 }
 

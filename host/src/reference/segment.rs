@@ -212,24 +212,8 @@ fn pca_of(a: f64, b: f64, c: f64) -> (f64, f64, f64) {
 
 /// PCA of a pixel set: centroid, angle, λ₁, λ₂ (population covariance).
 fn pca(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
-    let n = px.len() as f64;
-    let mx = px.iter().map(|p| p.0 as f64).sum::<f64>() / n;
-    let my = px.iter().map(|p| p.1 as f64).sum::<f64>() / n;
-    let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
-    for &(x, y) in px {
-        let (dx, dy) = (x as f64 - mx, y as f64 - my);
-        a += dx * dx;
-        b += dy * dy;
-        c += dx * dy;
-    }
-    let (a, b, c) = (a / n, b / n, c / n);
-    let d = (0.25 * (a - b) * (a - b) + c * c).sqrt();
-    let l1 = 0.5 * (a + b) + d;
-    let l2 = (0.5 * (a + b) - d).max(0.0);
-    let mut angle = 0.5 * (2.0 * c).atan2(a - b);
-    if angle <= -std::f64::consts::FRAC_PI_2 {
-        angle += std::f64::consts::PI;
-    }
+    let [mx, my, a, b, c] = centroid_cov(px);
+    let (angle, l1, l2) = pca_of(a, b, c);
     (mx, my, angle, l1, l2)
 }
 
@@ -626,20 +610,20 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         let seen = GrayImage::from_fn(rw, rh, |x, y| Luma([at(y * rw + x)]));
         // the water (Otsu's lower class): lower median and 1.4826 · MAD
         // (core: `local::water_level`)
-        let mut water: Vec<f64> = vals
+        let mut water: Vec<u32> = vals
             .iter()
             .filter(|&&v| v <= tau)
-            .map(|&v| v as f64)
+            .map(|&v| v as u32)
             .collect();
-        water.sort_by(|a, b| a.total_cmp(b));
         let (w_med, w_sigma) = if water.is_empty() {
             (tau as f64, 1.0)
         } else {
-            let k = water.len().div_ceil(2) - 1;
-            let med = water[k];
-            let mut dev: Vec<f64> = water.iter().map(|v| (v - med).abs()).collect();
-            dev.sort_by(|a, b| a.total_cmp(b));
-            (med, (1.4826 * dev[k]).max(1.0))
+            let med = lower_median(&mut water);
+            let mut dev: Vec<u32> = water.iter().map(|&v| v.abs_diff(med)).collect();
+            (
+                med as f64,
+                (1.4826 * lower_median(&mut dev) as f64).max(1.0),
+            )
         };
         let mut kept = GrayImage::new(rw, rh);
         for comp in components(&bmask) {
