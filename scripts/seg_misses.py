@@ -4,6 +4,8 @@
 Usage:
     seg_misses.py HAUL DETECTIONS.csv [HAUL DETECTIONS.csv ...]
 
+HAUL is a `fishtrack synth` haul (truth.json, calibration.yml, left/NNNNNN.png).
+
 For every countable truth fish-frame (visible left area >= theta_A^L scaled
 to the frame) that no detection matches at IoU >= 0.4, prints its class:
 
