@@ -158,6 +158,15 @@ pub struct LengthConfig {
     /// contrast in either view, what continues past the end is something
     /// else (a neighbour, glow) and the snake does not run there.
     pub probe_max_body_fraction: f32,
+    /// Beyond the paper: an end extended by the tail snake takes the
+    /// disparity of the unextended end continued along the chord through
+    /// the two unextended ends' disparities (a straight fish's disparity is
+    /// affine along its image axis), not the block line extrapolated.
+    pub chord_extension: bool,
+    /// Beyond the paper: an end extended where eq. (15) did not flag it
+    /// (both views cut alike) still passes the consistency gate
+    /// ([`LengthConfig::max_end_disagreement`]) on its unextended masks.
+    pub gate_extended_ends: bool,
 }
 
 impl Default for LengthConfig {
@@ -176,6 +185,8 @@ impl Default for LengthConfig {
             probe_noise_k: 1.0,
             probe_body_fraction: 0.06,
             probe_max_body_fraction: 0.5,
+            chord_extension: false,
+            gate_extended_ends: true,
         }
     }
 }
@@ -467,6 +478,7 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     let side = micromath::F32(h_o).round().0 as u32;
     let mu = pair.mu_sad.max(1.0);
     let mut ts = [t_lo, t_hi];
+    let mut flagged_ends = [false; 2];
     let bg = background_level(left_img, lo.bbox, (h_o * 0.5) as u32);
     let rh_o = (2.0 * ro.obb.half_h).clamp(2.0, 1024.0);
     let rbg = background_level(right_img, ro.bbox, (rh_o * 0.5) as u32);
@@ -505,6 +517,9 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
         fe.noise = bg.1;
         fe.contrast = lo.mean - bg.0;
         let flagged = mismatch && left_short;
+        if let Some(f) = flagged_ends.get_mut(e) {
+            *f = flagged;
+        }
         let gate = (cfg.probe_noise_k * bg.1)
             .max(cfg.probe_body_fraction * fe.contrast)
             .max(1.0);
@@ -591,22 +606,45 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     out.slope = b;
     let mut xyz = [Vector3::zeros(); 2];
     let t_orig = [t_lo, t_hi];
+    // the disparity of each unextended end: the mask ends' own where both
+    // views' outlines agree with the line (not at an end eq. (15) flagged:
+    // there the right mask holds the tail the left one lacks), else the line's
+    let mut d_end = [0.0f32; 2];
+    for e in 0..2 {
+        let fe = out.ends.get_mut(e).ok_or(LengthError::BadPair)?;
+        let d_at_end = a + b * t_orig[e];
+        let dev = (fe.mask_d - d_at_end).abs();
+        fe.mask_dev = dev / d_at_end.abs().max(1.0);
+        let mask_ok = !(fe.compensated && flagged_ends[e]) && dev <= cfg.mask_end_tolerance;
+        d_end[e] = if mask_ok { fe.mask_d } else { d_at_end };
+    }
+    // a fish is straight: its disparity is affine along the image axis, so
+    // an extended end continues the chord through the two validated ends
+    // rather than the block line's slope (a few px of slope error over a
+    // long extrapolation moved a far tail by 300 mm)
+    let span = t_hi - t_lo;
+    let chord = if span > 1e-3 {
+        (d_end[1] - d_end[0]) / span
+    } else {
+        b
+    };
     out.consistent = true;
     for e in 0..2 {
         let t = ts[e];
         let (x, y) = (cx + t * ux, cy + t * uy);
         let fe = out.ends.get_mut(e).ok_or(LengthError::BadPair)?;
-        // the mask ends' disparity where both views' outlines agree with the line
-        let d_at_end = a + b * t_orig[e];
-        let dev = (fe.mask_d - d_at_end).abs();
-        fe.mask_dev = dev / d_at_end.abs().max(1.0);
-        let d = if !fe.compensated && dev <= cfg.mask_end_tolerance {
-            fe.mask_d
+        let d = if !fe.compensated {
+            d_end[e]
+        } else if cfg.chord_extension {
+            d_end[e] + chord * (t - t_orig[e])
         } else {
             a + b * t
         };
         let agrees = fe.mask_dev <= cfg.max_end_disagreement; // false for NaN
-        if !fe.compensated && !agrees {
+                                                              // an end extended by a snake beside both views' cut ends (not one
+                                                              // eq. (15) flagged) must still have masks that agree there
+        let gated = !fe.compensated || (cfg.gate_extended_ends && !flagged_ends[e]);
+        if gated && !agrees {
             out.consistent = false;
         }
         let p = geom
