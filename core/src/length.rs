@@ -167,6 +167,11 @@ pub struct LengthConfig {
     /// (both views cut alike) still passes the consistency gate
     /// ([`LengthConfig::max_end_disagreement`]) on its unextended masks.
     pub gate_extended_ends: bool,
+    /// Beyond the paper: an end within `occlusion_radius` of another
+    /// object's mask in the left view may be where an occluder begins, not
+    /// where the fish ends: the length is withheld. The radius is this
+    /// fraction of `h_o`, clamped to 3–32 px; 0 switches the gate off.
+    pub occlusion_radius_fraction: f32,
 }
 
 impl Default for LengthConfig {
@@ -187,6 +192,7 @@ impl Default for LengthConfig {
             probe_max_body_fraction: 0.5,
             chord_extension: false,
             gate_extended_ends: true,
+            occlusion_radius_fraction: 0.25,
         }
     }
 }
@@ -219,6 +225,9 @@ pub struct FishEnd {
     pub noise: f32,
     /// Body mean minus background, left view.
     pub contrast: f32,
+    /// Another left object's mask lies within the occlusion radius of this
+    /// (unextended) end ([`LengthConfig::occlusion_radius_fraction`]).
+    pub touches_other: bool,
 }
 
 /// The 3-D length of one stereo pair in one frame.
@@ -436,6 +445,52 @@ fn unit_axis(obj: &Object) -> (f32, f32) {
     }
 }
 
+/// True when a mask pixel (centre) of an object of `objs` other than
+/// `skip` lies within `rad` pixels of `p`.
+pub fn near_other_object<const N: usize, const R: usize>(
+    objs: &Objects<N, R>,
+    skip: usize,
+    p: (f32, f32),
+    rad: f32,
+) -> bool {
+    if !(p.0.is_finite() && p.1.is_finite() && rad > 0.0) {
+        return false;
+    }
+    let r2 = rad * rad;
+    for (k, o) in objs.items.iter().enumerate() {
+        if k == skip {
+            continue;
+        }
+        let b = o.bbox;
+        if p.0 + rad < b.x as f32
+            || p.0 - rad > b.right() as f32
+            || p.1 + rad < b.y as f32
+            || p.1 - rad > b.bottom() as f32
+        {
+            continue;
+        }
+        for r in objs.runs_of(o) {
+            if r.is_empty() {
+                continue;
+            }
+            let dy = r.y as f32 - p.1;
+            if dy * dy > r2 {
+                continue;
+            }
+            // the run's pixel nearest p: |x − p.x| is convex in x
+            let xi = micromath::F32(p.0)
+                .round()
+                .0
+                .clamp(r.x0 as f32, (r.x1 - 1) as f32);
+            let dx = xi - p.0;
+            if dx * dx + dy * dy <= r2 {
+                return true;
+            }
+        }
+    }
+    false
+}
+
 /// Measures the 3-D length of one stereo pair (Section IV.D). `B` bounds the
 /// number of refined blocks.
 #[allow(clippy::too_many_arguments)]
@@ -647,6 +702,18 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
         if gated && !agrees {
             out.consistent = false;
         }
+        // an end against another object may be an occluder's edge
+        let te = t_orig[e];
+        fe.touches_other = cfg.occlusion_radius_fraction > 0.0
+            && near_other_object(
+                left,
+                pair.left as usize,
+                (cx + te * ux, cy + te * uy),
+                (cfg.occlusion_radius_fraction * h_o).clamp(3.0, 32.0),
+            );
+        if fe.touches_other {
+            out.consistent = false;
+        }
         let p = geom
             .triangulate(x, y, d)
             .ok_or(LengthError::Triangulation)?;
@@ -836,6 +903,52 @@ mod tests {
             let (lo, hi) = axis_extent(&runs, cx, cy, ux, uy, k).unwrap();
             proptest::prop_assert_eq!(lo, all[kk - 1]);
             proptest::prop_assert_eq!(hi, all[all.len() - kk]);
+        }
+    }
+
+    proptest::proptest! {
+        /// `near_other_object` agrees with checking every mask pixel of the
+        /// other objects (the float reference's definition), and never
+        /// counts the skipped object.
+        #[test]
+        fn near_other_object_matches_every_pixel(
+            objs in proptest::collection::vec(
+                (0u16..80, 0u16..80, proptest::collection::vec((0u16..20, 1u16..15), 1..8)),
+                1..5,
+            ),
+            px in -5.0f32..100.0,
+            py in -5.0f32..100.0,
+            rad in 0.5f32..12.0,
+            skip in 0usize..5,
+        ) {
+            let mut set = Objects::<8, 64>::new();
+            for (ox, oy, rows) in &objs {
+                let start = set.runs.len() as u32;
+                let (mut x0m, mut x1m) = (u16::MAX, 0u16);
+                for (k, &(dx, n)) in rows.iter().enumerate() {
+                    let r = Run { y: oy + k as u16, x0: ox + dx, x1: ox + dx + n };
+                    x0m = x0m.min(r.x0);
+                    x1m = x1m.max(r.x1);
+                    set.runs.push(r).unwrap();
+                }
+                let mut o = Object {
+                    bbox: Roi::new(x0m as u32, *oy as u32, (x1m - x0m) as u32, rows.len() as u32),
+                    ..Object::default()
+                };
+                o.runs.start = start;
+                o.runs.len = rows.len() as u32;
+                set.items.push(o).unwrap();
+            }
+            let brute = set.items.iter().enumerate().any(|(k, o)| {
+                k != skip
+                    && set.runs_of(o).iter().any(|r| {
+                        (r.x0..r.x1).any(|x| {
+                            let (dx, dy) = (x as f32 - px, r.y as f32 - py);
+                            dx * dx + dy * dy <= rad * rad
+                        })
+                    })
+            });
+            proptest::prop_assert_eq!(near_other_object(&set, skip, (px, py), rad), brute);
         }
     }
 

@@ -909,6 +909,21 @@ pub fn length(
         } else {
             a + b * ts[e]
         };
+        // an end against another left object may be an occluder's edge
+        if cfg.occlusion_radius_fraction > 0.0 {
+            let te = t_orig[e];
+            let pe = (lo.centre.0 + te * u.0, lo.centre.1 + te * u.1);
+            let rad = (cfg.occlusion_radius_fraction as f64 * h_o).clamp(3.0, 32.0);
+            let near = left.iter().enumerate().any(|(k, o)| {
+                k != p.left
+                    && o.pixels.iter().any(|&(px, py)| {
+                        (px as f64 - pe.0).powi(2) + (py as f64 - pe.1).powi(2) <= rad * rad
+                    })
+            });
+            if near {
+                consistent = false;
+            }
+        }
         let gated = !comp[e] || (cfg.gate_extended_ends && !flagged_ends[e]);
         let agrees = dev[e] <= cfg.max_end_disagreement as f64; // false for NaN
         if gated && !agrees {
