@@ -158,6 +158,20 @@ pub struct LengthConfig {
     /// contrast in either view, what continues past the end is something
     /// else (a neighbour, glow) and the snake does not run there.
     pub probe_max_body_fraction: f32,
+    /// Beyond the paper: an end extended by the tail snake takes the
+    /// disparity of the unextended end continued along the chord through
+    /// the two unextended ends' disparities (a straight fish's disparity is
+    /// affine along its image axis), not the block line extrapolated.
+    pub chord_extension: bool,
+    /// Beyond the paper: an end extended where eq. (15) did not flag it
+    /// (both views cut alike) still passes the consistency gate
+    /// ([`LengthConfig::max_end_disagreement`]) on its unextended masks.
+    pub gate_extended_ends: bool,
+    /// Beyond the paper: an end within `occlusion_radius` of another
+    /// object's mask in the left view may be where an occluder begins, not
+    /// where the fish ends: the length is withheld. The radius is this
+    /// fraction of `h_o`, clamped to 3–32 px; 0 switches the gate off.
+    pub occlusion_radius_fraction: f32,
 }
 
 impl Default for LengthConfig {
@@ -176,6 +190,9 @@ impl Default for LengthConfig {
             probe_noise_k: 1.0,
             probe_body_fraction: 0.06,
             probe_max_body_fraction: 0.5,
+            chord_extension: false,
+            gate_extended_ends: true,
+            occlusion_radius_fraction: 0.25,
         }
     }
 }
@@ -208,6 +225,9 @@ pub struct FishEnd {
     pub noise: f32,
     /// Body mean minus background, left view.
     pub contrast: f32,
+    /// Another left object's mask lies within the occlusion radius of this
+    /// (unextended) end ([`LengthConfig::occlusion_radius_fraction`]).
+    pub touches_other: bool,
 }
 
 /// The 3-D length of one stereo pair in one frame.
@@ -425,6 +445,52 @@ fn unit_axis(obj: &Object) -> (f32, f32) {
     }
 }
 
+/// True when a mask pixel (centre) of an object of `objs` other than
+/// `skip` lies within `rad` pixels of `p`.
+pub fn near_other_object<const N: usize, const R: usize>(
+    objs: &Objects<N, R>,
+    skip: usize,
+    p: (f32, f32),
+    rad: f32,
+) -> bool {
+    if !(p.0.is_finite() && p.1.is_finite() && rad > 0.0) {
+        return false;
+    }
+    let r2 = rad * rad;
+    for (k, o) in objs.items.iter().enumerate() {
+        if k == skip {
+            continue;
+        }
+        let b = o.bbox;
+        if p.0 + rad < b.x as f32
+            || p.0 - rad > b.right() as f32
+            || p.1 + rad < b.y as f32
+            || p.1 - rad > b.bottom() as f32
+        {
+            continue;
+        }
+        for r in objs.runs_of(o) {
+            if r.is_empty() {
+                continue;
+            }
+            let dy = r.y as f32 - p.1;
+            if dy * dy > r2 {
+                continue;
+            }
+            // the run's pixel nearest p: |x − p.x| is convex in x
+            let xi = micromath::F32(p.0)
+                .round()
+                .0
+                .clamp(r.x0 as f32, (r.x1 - 1) as f32);
+            let dx = xi - p.0;
+            if dx * dx + dy * dy <= r2 {
+                return true;
+            }
+        }
+    }
+    false
+}
+
 /// Measures the 3-D length of one stereo pair (Section IV.D). `B` bounds the
 /// number of refined blocks.
 #[allow(clippy::too_many_arguments)]
@@ -467,6 +533,7 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     let side = micromath::F32(h_o).round().0 as u32;
     let mu = pair.mu_sad.max(1.0);
     let mut ts = [t_lo, t_hi];
+    let mut flagged_ends = [false; 2];
     let bg = background_level(left_img, lo.bbox, (h_o * 0.5) as u32);
     let rh_o = (2.0 * ro.obb.half_h).clamp(2.0, 1024.0);
     let rbg = background_level(right_img, ro.bbox, (rh_o * 0.5) as u32);
@@ -505,6 +572,9 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
         fe.noise = bg.1;
         fe.contrast = lo.mean - bg.0;
         let flagged = mismatch && left_short;
+        if let Some(f) = flagged_ends.get_mut(e) {
+            *f = flagged;
+        }
         let gate = (cfg.probe_noise_k * bg.1)
             .max(cfg.probe_body_fraction * fe.contrast)
             .max(1.0);
@@ -591,22 +661,57 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     out.slope = b;
     let mut xyz = [Vector3::zeros(); 2];
     let t_orig = [t_lo, t_hi];
+    // the disparity of each unextended end: the mask ends' own where both
+    // views' outlines agree with the line (not at an end eq. (15) flagged:
+    // there the right mask holds the tail the left one lacks), else the line's
+    let mut d_end = [0.0f32; 2];
+    for e in 0..2 {
+        let fe = out.ends.get_mut(e).ok_or(LengthError::BadPair)?;
+        let d_at_end = a + b * t_orig[e];
+        let dev = (fe.mask_d - d_at_end).abs();
+        fe.mask_dev = dev / d_at_end.abs().max(1.0);
+        let mask_ok = !(fe.compensated && flagged_ends[e]) && dev <= cfg.mask_end_tolerance;
+        d_end[e] = if mask_ok { fe.mask_d } else { d_at_end };
+    }
+    // a fish is straight: its disparity is affine along the image axis, so
+    // an extended end continues the chord through the two validated ends
+    // rather than the block line's slope (a few px of slope error over a
+    // long extrapolation moved a far tail by 300 mm)
+    let span = t_hi - t_lo;
+    let chord = if span > 1e-3 {
+        (d_end[1] - d_end[0]) / span
+    } else {
+        b
+    };
     out.consistent = true;
     for e in 0..2 {
         let t = ts[e];
         let (x, y) = (cx + t * ux, cy + t * uy);
         let fe = out.ends.get_mut(e).ok_or(LengthError::BadPair)?;
-        // the mask ends' disparity where both views' outlines agree with the line
-        let d_at_end = a + b * t_orig[e];
-        let dev = (fe.mask_d - d_at_end).abs();
-        fe.mask_dev = dev / d_at_end.abs().max(1.0);
-        let d = if !fe.compensated && dev <= cfg.mask_end_tolerance {
-            fe.mask_d
+        let d = if !fe.compensated {
+            d_end[e]
+        } else if cfg.chord_extension {
+            d_end[e] + chord * (t - t_orig[e])
         } else {
             a + b * t
         };
         let agrees = fe.mask_dev <= cfg.max_end_disagreement; // false for NaN
-        if !fe.compensated && !agrees {
+                                                              // an end extended by a snake beside both views' cut ends (not one
+                                                              // eq. (15) flagged) must still have masks that agree there
+        let gated = !fe.compensated || (cfg.gate_extended_ends && !flagged_ends[e]);
+        if gated && !agrees {
+            out.consistent = false;
+        }
+        // an end against another object may be an occluder's edge
+        let te = t_orig[e];
+        fe.touches_other = cfg.occlusion_radius_fraction > 0.0
+            && near_other_object(
+                left,
+                pair.left as usize,
+                (cx + te * ux, cy + te * uy),
+                (cfg.occlusion_radius_fraction * h_o).clamp(3.0, 32.0),
+            );
+        if fe.touches_other {
             out.consistent = false;
         }
         let p = geom
@@ -798,6 +903,52 @@ mod tests {
             let (lo, hi) = axis_extent(&runs, cx, cy, ux, uy, k).unwrap();
             proptest::prop_assert_eq!(lo, all[kk - 1]);
             proptest::prop_assert_eq!(hi, all[all.len() - kk]);
+        }
+    }
+
+    proptest::proptest! {
+        /// `near_other_object` agrees with checking every mask pixel of the
+        /// other objects (the float reference's definition), and never
+        /// counts the skipped object.
+        #[test]
+        fn near_other_object_matches_every_pixel(
+            objs in proptest::collection::vec(
+                (0u16..80, 0u16..80, proptest::collection::vec((0u16..20, 1u16..15), 1..8)),
+                1..5,
+            ),
+            px in -5.0f32..100.0,
+            py in -5.0f32..100.0,
+            rad in 0.5f32..12.0,
+            skip in 0usize..5,
+        ) {
+            let mut set = Objects::<8, 64>::new();
+            for (ox, oy, rows) in &objs {
+                let start = set.runs.len() as u32;
+                let (mut x0m, mut x1m) = (u16::MAX, 0u16);
+                for (k, &(dx, n)) in rows.iter().enumerate() {
+                    let r = Run { y: oy + k as u16, x0: ox + dx, x1: ox + dx + n };
+                    x0m = x0m.min(r.x0);
+                    x1m = x1m.max(r.x1);
+                    set.runs.push(r).unwrap();
+                }
+                let mut o = Object {
+                    bbox: Roi::new(x0m as u32, *oy as u32, (x1m - x0m) as u32, rows.len() as u32),
+                    ..Object::default()
+                };
+                o.runs.start = start;
+                o.runs.len = rows.len() as u32;
+                set.items.push(o).unwrap();
+            }
+            let brute = set.items.iter().enumerate().any(|(k, o)| {
+                k != skip
+                    && set.runs_of(o).iter().any(|r| {
+                        (r.x0..r.x1).any(|x| {
+                            let (dx, dy) = (x as f32 - px, r.y as f32 - py);
+                            dx * dx + dy * dy <= rad * rad
+                        })
+                    })
+            });
+            proptest::prop_assert_eq!(near_other_object(&set, skip, (px, py), rad), brute);
         }
     }
 

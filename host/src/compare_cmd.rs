@@ -119,6 +119,8 @@ pub fn run(dir: &Path) -> Result<()> {
                 let len = inside
                     .then(|| rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length))
                     .flatten();
+                // only usable lengths: both sides must withhold the same ones
+                let len = len.filter(|v| v.consistent);
                 (p.left, p.right, len.map(|v| v.length))
             })
             .collect();
@@ -131,7 +133,7 @@ pub fn run(dir: &Path) -> Result<()> {
                 (
                     p.left as usize,
                     p.right as usize,
-                    l.map(|v| v.length_mm as f64),
+                    l.filter(|v| v.consistent).map(|v| v.length_mm as f64),
                 )
             })
             .collect();

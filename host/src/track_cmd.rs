@@ -250,6 +250,9 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     let mut events: Vec<PipelineEvent> = Vec::new();
     let mut secs = [0.0f64; STAGES.len()];
     let started = Instant::now();
+    // FISHTRACK_STEREO_DIAG=1: every right object (analysis aid)
+    let mut right_diag =
+        std::env::var_os("FISHTRACK_STEREO_DIAG").map(|_| String::from("frame,x,y,w,h,area\n"));
     // read + rectify run ahead on another thread (crate::frame_source)
     crate::frame_source::for_each_rectified(&setup, &setup.haul.frames, |rp| {
         let pair = rp.pair;
@@ -278,9 +281,21 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
         .map_err(|e| {
             InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
         })?;
+        if let Some(d) = right_diag.as_mut() {
+            for o in pipe.right_objects().items.iter() {
+                let b = raw_box(&setup.rectifier.right, &o.bbox);
+                d.push_str(&format!(
+                    "{},{},{},{},{},{}\n",
+                    pair.index, b[0], b[1], b[2], b[3], o.area
+                ));
+            }
+        }
         bar.inc(1);
         Ok(())
     })?;
+    if let Some(d) = right_diag {
+        std::fs::write(out.join("right_objects_diag.csv"), d)?;
+    }
     bar.finish_and_clear();
     let t = Instant::now();
     pipe.finish(&mut |e| events.push(*e));
@@ -329,6 +344,9 @@ fn write_outputs(
     let mut tracks = Vec::new();
     let mut fish = Vec::new();
     let mut duplicates = BTreeSet::new();
+    // FISHTRACK_STEREO_DIAG=1: every pair's length measurement in
+    // OUT/stereo_diag.csv (analysis aid, not part of the output contract)
+    let mut diag = std::env::var_os("FISHTRACK_STEREO_DIAG").map(|_| String::new());
     for e in events {
         match *e {
             PipelineEvent::Object {
@@ -351,6 +369,9 @@ fn write_outputs(
                     conf: 1.0,
                     length_px: (len_px > 0.0).then_some(len_px),
                 });
+                if let (Some(d), Some(s)) = (diag.as_mut(), st) {
+                    diag_row(d, frame, &lb, &raw_box(&rect.right, &s.right_box), &s);
+                }
                 // lengths whose views disagree are withheld (core::length)
                 let fl = st.and_then(|s| s.length).filter(|l| l.consistent);
                 stereo.push(StereoRow::new(
@@ -417,6 +438,9 @@ fn write_outputs(
         FPS,
     )?;
     write_stereo(&out.join("stereo.csv"), &stereo)?;
+    if let Some(d) = diag {
+        std::fs::write(out.join("stereo_diag.csv"), d)?;
+    }
     Ok(Written {
         tracks: tracks.len(),
         detections: dets.len(),
@@ -424,6 +448,71 @@ fn write_outputs(
         duplicates: duplicates.len(),
         fish,
     })
+}
+
+/// One `stereo_diag.csv` line: frame, raw left and right boxes, then the
+/// pair's `FishLength` fields (empty when not measured).
+fn diag_row(
+    out: &mut String,
+    frame: u32,
+    lb: &[f64; 4],
+    rb: &[f64; 4],
+    s: &fishtrack_core::pipeline::StereoInfo,
+) {
+    use std::fmt::Write as _;
+    if out.is_empty() {
+        out.push_str("frame,lx,ly,lw,lh,rx,ry,rw,rh,d_o,mu_sad,inside,measured,consistent,length_mm,blocks,slope,cz");
+        for e in 0..2 {
+            let _ = write!(
+                out,
+                ",e{e}_px,e{e}_py,e{e}_d,e{e}_mask_d,e{e}_dev,e{e}_z,e{e}_ratio,e{e}_mis,e{e}_comp,e{e}_pl,e{e}_pr"
+            );
+        }
+        out.push('\n');
+    }
+    let _ = write!(
+        out,
+        "{frame},{},{},{},{},{},{},{},{},{},{},{}",
+        lb[0],
+        lb[1],
+        lb[2],
+        lb[3],
+        rb[0],
+        rb[1],
+        rb[2],
+        rb[3],
+        s.pair.d_o,
+        s.pair.mu_sad,
+        s.wholly_inside as u8
+    );
+    match s.length {
+        Some(l) => {
+            let _ = write!(
+                out,
+                ",1,{},{},{},{},{}",
+                l.consistent as u8, l.length_mm, l.blocks, l.slope, l.centre[2]
+            );
+            for e in l.ends.iter() {
+                let _ = write!(
+                    out,
+                    ",{},{},{},{},{},{},{},{},{},{},{}",
+                    e.px.0,
+                    e.px.1,
+                    e.d,
+                    e.mask_d,
+                    e.mask_dev,
+                    e.xyz[2],
+                    e.sad_ratio,
+                    e.mismatch as u8,
+                    e.compensated as u8,
+                    e.probe[0],
+                    e.probe[1]
+                );
+            }
+        }
+        None => out.push_str(",0,,,,,,,,,,,,,,,,,,,,,,,,,,,"),
+    }
+    out.push('\n');
 }
 
 fn write_summary(

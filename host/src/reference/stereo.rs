@@ -753,6 +753,7 @@ pub fn length(
     let mut ts = [t_lo, t_hi];
     let mut comp = [false; 2];
     let mut mask_d = [0.0f64; 2];
+    let mut flagged_ends = [false; 2];
     for (e, s) in [(0usize, -1.0f64), (1, 1.0)] {
         let end = (lo.centre.0 + ts[e] * u.0, lo.centre.1 + ts[e] * u.1);
         let &(re, rs) = rends.iter().min_by(|a, b| {
@@ -789,6 +790,7 @@ pub fn length(
         let mismatch = ratio * cfg.sad_ratio_scale as f64 > params.theta_sad as f64;
         let left_short = (re.0 + p.d_o - end.0) * s * u.0 + (re.1 - end.1) * s * u.1 > 1.0;
         let flagged = mismatch && left_short;
+        flagged_ends[e] = flagged;
         // the probe gate: something brighter than the background continues
         // past the end in both views
         let pside = ((h_o * 0.5) as i64).max(3);
@@ -880,18 +882,51 @@ pub fn length(
     };
     let mut ends = [Vector3::zeros(); 2];
     let mut consistent = true;
+    let t_orig = [t_lo, t_hi];
+    // each unextended end: the masks' own disparity where it agrees with
+    // the line (not at an end eq. 15 flagged), else the line's
+    let mut d_end = [0.0f64; 2];
+    let mut dev = [0.0f64; 2];
+    for e in 0..2 {
+        let d_line = a + b * t_orig[e];
+        dev[e] = (mask_d[e] - d_line).abs() / d_line.abs().max(1.0);
+        let mask_ok = !(comp[e] && flagged_ends[e])
+            && (mask_d[e] - d_line).abs() <= cfg.mask_end_tolerance as f64;
+        d_end[e] = if mask_ok { mask_d[e] } else { d_line };
+    }
+    // an extended end continues the chord through the two unextended ends
+    let chord = if t_hi - t_lo > 1e-3 {
+        (d_end[1] - d_end[0]) / (t_hi - t_lo)
+    } else {
+        b
+    };
     for e in 0..2 {
         let (x, y) = (lo.centre.0 + ts[e] * u.0, lo.centre.1 + ts[e] * u.1);
-        // the masks' own end disparity where it agrees with the line
-        let t0 = if e == 0 { t_lo } else { t_hi };
-        let d_line = a + b * t0;
-        let dev = (mask_d[e] - d_line).abs();
-        let d = if !comp[e] && dev <= cfg.mask_end_tolerance as f64 {
-            mask_d[e]
+        let d = if !comp[e] {
+            d_end[e]
+        } else if cfg.chord_extension {
+            d_end[e] + chord * (ts[e] - t_orig[e])
         } else {
             a + b * ts[e]
         };
-        if !comp[e] && dev / d_line.abs().max(1.0) > cfg.max_end_disagreement as f64 {
+        // an end against another left object may be an occluder's edge
+        if cfg.occlusion_radius_fraction > 0.0 {
+            let te = t_orig[e];
+            let pe = (lo.centre.0 + te * u.0, lo.centre.1 + te * u.1);
+            let rad = (cfg.occlusion_radius_fraction as f64 * h_o).clamp(3.0, 32.0);
+            let near = left.iter().enumerate().any(|(k, o)| {
+                k != p.left
+                    && o.pixels.iter().any(|&(px, py)| {
+                        (px as f64 - pe.0).powi(2) + (py as f64 - pe.1).powi(2) <= rad * rad
+                    })
+            });
+            if near {
+                consistent = false;
+            }
+        }
+        let gated = !comp[e] || (cfg.gate_extended_ends && !flagged_ends[e]);
+        let agrees = dev[e] <= cfg.max_end_disagreement as f64; // false for NaN
+        if gated && !agrees {
             consistent = false;
         }
         ends[e] = geom.triangulate(x, y, d)?;
