@@ -57,6 +57,9 @@ pub struct TrackOptions {
     pub tracker: Option<String>,
     /// `--overlays`.
     pub overlays: bool,
+    /// `--rect-alpha A`: the rectification's free scaling
+    /// ([`crate::rectify::DEFAULT_ALPHA`] when absent).
+    pub rect_alpha: Option<f64>,
 }
 
 /// A haul made ready for the pipeline.
@@ -88,6 +91,19 @@ pub fn parse_tracker(s: &str) -> Result<Association, InputError> {
     }
 }
 
+/// Checks `--rect-alpha`: OpenCV's free scaling is in `[0, 1]`, or negative
+/// for its default scaling (taken as −1).
+pub fn check_alpha(a: f64) -> Result<f64, InputError> {
+    if a.is_finite() && a <= 1.0 {
+        Ok(if a < 0.0 { -1.0 } else { a })
+    } else {
+        Err(InputError::plain(
+            "--rect-alpha",
+            format!("{a} is not in [0, 1] (or negative for OpenCV's default scaling)"),
+        ))
+    }
+}
+
 /// Opens `dir` and prepares calibration, rectification, parameters and geometry.
 pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     let haul = Haul::open(dir)?;
@@ -103,7 +119,10 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     })?;
     haul.calibration()?;
     let calib = StereoCalib::load(&haul.dir, Some(size))?;
-    let rectifier = Rectifier::new(&calib);
+    let rectifier = Rectifier::with_alpha(
+        &calib,
+        check_alpha(opts.rect_alpha.unwrap_or(crate::rectify::DEFAULT_ALPHA))?,
+    );
     if rectifier.rect.vertical {
         return Err(InputError::file(
             &haul.dir,
@@ -180,7 +199,7 @@ pub fn raw_box(cam: &RectifiedCamera, b: &Roi) -> [f64; 4] {
     // pixel indices x..x+w−1: outline x−½ .. x+w−½
     let (x0, y0) = (b.x as f64 - 0.5, b.y as f64 - 0.5);
     let (x1, y1) = (x0 + b.w as f64, y0 + b.h as f64);
-    let (a, c, d, e) = cam.rect_box_to_raw(x0, y0, x1, y1);
+    let (a, c, d, e) = cam.rect_box_to_raw_clipped(x0, y0, x1, y1);
     [a + 0.5, c + 0.5, (d - a).max(0.0), (e - c).max(0.0)]
 }
 
