@@ -71,6 +71,10 @@ pub fn detection_rows<const N: usize, const R: usize>(
             b.right() as f64 - 0.5,
             b.bottom() as f64 - 0.5,
         );
+        if x1 <= x0 || y1 <= y0 {
+            // wholly in the fill of an alpha > 0 rectification
+            continue;
+        }
         let ob = &o.obb;
         let (c, s) = ((ob.angle as f64).cos(), (ob.angle as f64).sin());
         let hw = ob.half_w as f64;

@@ -104,6 +104,19 @@ pub fn check_alpha(a: f64) -> Result<f64, InputError> {
     }
 }
 
+#[cfg(test)]
+mod alpha_tests {
+    #[test]
+    fn rect_alpha_is_checked() {
+        assert_eq!(super::check_alpha(0.25).unwrap(), 0.25);
+        assert_eq!(super::check_alpha(-3.0).unwrap(), -1.0);
+        for bad in [1.5, f64::NAN, f64::INFINITY] {
+            let e = super::check_alpha(bad).unwrap_err().to_string();
+            assert!(e.contains("--rect-alpha"), "{e}");
+        }
+    }
+}
+
 /// Opens `dir` and prepares calibration, rectification, parameters and geometry.
 pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     let haul = Haul::open(dir)?;
@@ -162,7 +175,9 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
 impl Setup {
     /// The pipeline configuration of this haul.
     pub fn pipeline_config(&self) -> PipelineConfig {
-        PipelineConfig::new(self.params, self.geometry, self.width, self.height)
+        let mut cfg = PipelineConfig::new(self.params, self.geometry, self.width, self.height);
+        cfg.valid = self.rectifier.valid_rois();
+        cfg
     }
 
     /// Loads and rectifies one frame pair.
@@ -194,7 +209,15 @@ pub fn views<'a>(l: &'a GrayImage, r: &'a GrayImage) -> Result<(ImageView<'a>, I
     Ok((lv, rv))
 }
 
-/// A rectified upright box → `[x, y, w, h]` in the camera's raw pixels.
+/// Whether a raw box (from [`raw_box`], clipped to the raw frame) holds
+/// any of the raw view: a box wholly in the fill of an `alpha > 0`
+/// rectification clips to zero width or height.
+pub fn in_raw_view(b: &[f64; 4]) -> bool {
+    b[2] > 0.0 && b[3] > 0.0
+}
+
+/// A rectified upright box → `[x, y, w, h]` in the camera's raw pixels
+/// (clipped to the raw frame).
 pub fn raw_box(cam: &RectifiedCamera, b: &Roi) -> [f64; 4] {
     // pixel indices x..x+w−1: outline x−½ .. x+w−½
     let (x0, y0) = (b.x as f64 - 0.5, b.y as f64 - 0.5);
@@ -358,6 +381,10 @@ fn write_outputs(
                 ..
             } => {
                 let lb = raw_box(&rect.left, &bbox);
+                if !in_raw_view(&lb) {
+                    // wholly in the fill of an alpha > 0 rectification
+                    continue;
+                }
                 let (c, s) = (obb.angle.cos() as f64, obb.angle.sin() as f64);
                 let hw = obb.half_w as f64;
                 let (cx, cy) = (obb.cx as f64, obb.cy as f64);
@@ -421,6 +448,11 @@ fn write_outputs(
             PipelineEvent::StageDone { .. } | PipelineEvent::FrameDone { .. } => {}
         }
     }
+    // rows wholly in the fill (alpha > 0) are not in the raw view; a track
+    // never in it is no fish
+    tracks.retain(|r| in_raw_view(&r.bbox));
+    let seen: BTreeSet<_> = tracks.iter().map(|r| r.id).collect();
+    fish.retain(|f| seen.contains(&f.track_id) && !duplicates.contains(&f.track_id));
     tracks.retain(|r| !duplicates.contains(&r.id));
     tracks.sort_by_key(|r| (r.frame, r.id));
     fish.sort_by_key(|f| f.track_id);
