@@ -163,8 +163,8 @@ pub fn rodrigues_mat_to_vec(m: &Matrix3<f64>) -> Vector3<f64> {
 /// The rectification's default free scaling (OpenCV `alpha`), used by
 /// [`Rectifier::new`] and every command unless `--rect-alpha` says
 /// otherwise. DESIGN.md asks for `alpha = 0` (only valid pixels), which
-/// crops a 25–250 px strip of the raw views away, and with it the fish
-/// entering and leaving there; 0.25 keeps most of that strip at a 3–7 %
+/// crops a 5–260 px strip of the raw views away, and with it the fish
+/// entering and leaving there; 0.25 keeps part of that strip at a 3–5 %
 /// smaller focal length and was the only value of 0, 0.25, 0.5, 0.75, 1, −1
 /// that improved segmentation, tracking and both 3-D length figures on
 /// seeds 1–8 pooled (README "Input: a haul directory").
