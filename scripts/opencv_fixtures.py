@@ -21,6 +21,13 @@ under OUTDIR/<case>/:
   left_rect.png right_rect.png  cv2.remap(INTER_LINEAR, BORDER_CONSTANT) of it through
                                 cv2.initUndistortRectifyMap(..., CV_32FC1)
   left_map.f32 right_map.f32    those float maps, little-endian f32, x plane then y plane
+  left_rep.png right_rep.png    the same remap with BORDER_REPLICATE
+  left_ref.png right_ref.png    the same remap with BORDER_REFLECT_101 (FishTrack's fill)
+
+and the same set for alpha = 1 (keep every source pixel) and alpha = -1
+(OpenCV's default scaling) with the suffix _a1 / _am1 on every name
+(reference_a1.json, left_rect_a1.png, left_map_a1.f32, left_ref_a1.png, ...);
+the calibration files are the same for every alpha.
 
 Everything is deterministic (fixed seeds).
 """
@@ -114,7 +121,8 @@ def main():
         d2 = np.array(c["d2"], dtype=np.float64).reshape(1, -1)
         r = rodrigues(c["rvec"])
         t = np.array(c["t"], dtype=np.float64).reshape(3, 1)
-        r1, r2, p1, p2, q, roi1, roi2 = cv2.stereoRectify(
+        # the stereo_calib sample's extrinsics.yml carries alpha = 0 results
+        r1, r2, p1, p2, q, _, _ = cv2.stereoRectify(
             m1, d1, m2, d2, (W, H), r, t, flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
 
         write_fs(os.path.join(d, "single", "calibration.yml"),
@@ -139,31 +147,42 @@ def main():
         img = test_image(1000 + idx)
         cv2.imwrite(os.path.join(d, "left.png"), img)
         cv2.imwrite(os.path.join(d, "right.png"), img)
-
-        ref = dict(width=W, height=H, M1=m1.tolist(), D1=d1.ravel().tolist(),
-                   M2=m2.tolist(), D2=d2.ravel().tolist(), R=r.tolist(),
-                   T=t.ravel().tolist(), R1=r1.tolist(), R2=r2.tolist(),
-                   P1=p1.tolist(), P2=p2.tolist(), Q=q.tolist(),
-                   roi1=list(roi1), roi2=list(roi2), opencv=cv2.__version__)
-        rng = np.random.default_rng(77 + idx)
-        raw = np.concatenate([
-            rng.uniform([0, 0], [W - 1, H - 1], size=(200, 2)),
-            np.array([[x, y] for x in (0, W / 2, W - 1) for y in (0, H / 2, H - 1)]),
-        ]).astype(np.float64)
-        for side, m, dd, ri, pi in (("left", m1, d1, r1, p1), ("right", m2, d2, r2, p2)):
-            mx, my = cv2.initUndistortRectifyMap(m, dd, ri, pi, (W, H), cv2.CV_32FC1)
-            rect = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                             borderValue=0)
-            cv2.imwrite(os.path.join(d, side + "_rect.png"), rect)
-            with open(os.path.join(d, side + "_map.f32"), "wb") as f:
-                f.write(mx.astype("<f4").tobytes())
-                f.write(my.astype("<f4").tobytes())
-            und = cv2.undistortPoints(raw.reshape(-1, 1, 2), m, dd, R=ri, P=pi, criteria=crit)
-            ref[side + "_raw"] = raw.tolist()
-            ref[side + "_rect"] = und.reshape(-1, 2).tolist()
-        with open(os.path.join(d, "reference.json"), "w") as f:
-            json.dump(ref, f, indent=1)
+        for alpha, tag in ((0, ""), (1, "_a1"), (-1, "_am1")):
+            write_alpha(d, idx, img, m1, d1, m2, d2, r, t, crit, alpha, tag)
     print("wrote", ", ".join(CASES), "to", out)
+
+
+def write_alpha(d, idx, img, m1, d1, m2, d2, r, t, crit, alpha, tag):
+    """The references of one alpha, every file name suffixed with `tag`."""
+    r1, r2, p1, p2, q, roi1, roi2 = cv2.stereoRectify(
+        m1, d1, m2, d2, (W, H), r, t, flags=cv2.CALIB_ZERO_DISPARITY, alpha=alpha)
+    ref = dict(alpha=alpha, width=W, height=H, M1=m1.tolist(), D1=d1.ravel().tolist(),
+               M2=m2.tolist(), D2=d2.ravel().tolist(), R=r.tolist(),
+               T=t.ravel().tolist(), R1=r1.tolist(), R2=r2.tolist(),
+               P1=p1.tolist(), P2=p2.tolist(), Q=q.tolist(),
+               roi1=list(roi1), roi2=list(roi2), opencv=cv2.__version__)
+    rng = np.random.default_rng(77 + idx)
+    raw = np.concatenate([
+        rng.uniform([0, 0], [W - 1, H - 1], size=(200, 2)),
+        np.array([[x, y] for x in (0, W / 2, W - 1) for y in (0, H / 2, H - 1)]),
+    ]).astype(np.float64)
+    for side, m, dd, ri, pi in (("left", m1, d1, r1, p1), ("right", m2, d2, r2, p2)):
+        mx, my = cv2.initUndistortRectifyMap(m, dd, ri, pi, (W, H), cv2.CV_32FC1)
+        rect = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=0)
+        cv2.imwrite(os.path.join(d, side + "_rect" + tag + ".png"), rect)
+        rep = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        cv2.imwrite(os.path.join(d, side + "_rep" + tag + ".png"), rep)
+        refl = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+        cv2.imwrite(os.path.join(d, side + "_ref" + tag + ".png"), refl)
+        with open(os.path.join(d, side + "_map" + tag + ".f32"), "wb") as f:
+            f.write(mx.astype("<f4").tobytes())
+            f.write(my.astype("<f4").tobytes())
+        und = cv2.undistortPoints(raw.reshape(-1, 1, 2), m, dd, R=ri, P=pi, criteria=crit)
+        ref[side + "_raw"] = raw.tolist()
+        ref[side + "_rect"] = und.reshape(-1, 2).tolist()
+    with open(os.path.join(d, "reference" + tag + ".json"), "w") as f:
+        json.dump(ref, f, indent=1)
 
 
 if __name__ == "__main__":

@@ -733,15 +733,26 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
 /// border of a `width × height` frame: the fish is wholly inside both views
 /// and its length is measurable.
 pub fn wholly_inside(left: &Roi, right: &Roi, width: u32, height: u32, margin: u32) -> bool {
+    let frame = Roi::new(0, 0, width, height);
+    wholly_inside_valid(left, right, &[frame, frame], margin)
+}
+
+/// True when each box keeps at least `margin` (≥ 1) pixels from every edge
+/// of its view's valid rectangle (`valid[0]` left, `valid[1]` right): the
+/// part of a rectified frame where every pixel has a raw source. Beyond
+/// it the frame shows the rectification's fill (an `alpha > 0`
+/// rectification keeps the raw view's edges), so a fish reaching it is cut
+/// by the edge of the raw view. [`wholly_inside`] is the whole-frame case.
+pub fn wholly_inside_valid(left: &Roi, right: &Roi, valid: &[Roi; 2], margin: u32) -> bool {
     let m = margin.max(1);
-    let ok = |b: &Roi| {
+    let ok = |b: &Roi, v: &Roi| {
         !b.is_empty()
-            && b.x >= m
-            && b.y >= m
-            && b.right().saturating_add(m) <= width
-            && b.bottom().saturating_add(m) <= height
+            && b.x >= v.x.saturating_add(m)
+            && b.y >= v.y.saturating_add(m)
+            && b.right().saturating_add(m) <= v.right()
+            && b.bottom().saturating_add(m) <= v.bottom()
     };
-    ok(left) && ok(right)
+    ok(left, &valid[0]) && ok(right, &valid[1])
 }
 
 /// A track's length estimate.

@@ -34,7 +34,8 @@ use crate::error::ImageError;
 use crate::geometry::StereoGeometry;
 use crate::image::{ImageView, Roi};
 use crate::length::{
-    measure_length, wholly_inside, FishLength, LengthAccumulator, LengthConfig, LengthEstimate,
+    measure_length, wholly_inside_valid, FishLength, LengthAccumulator, LengthConfig,
+    LengthEstimate,
 };
 use crate::object::{Object, Objects, OrientedBox};
 use crate::params::Params;
@@ -98,6 +99,11 @@ pub struct PipelineConfig {
     pub length: LengthConfig,
     /// Border margin (pixels) for the wholly-inside test of a length.
     pub inside_margin: u32,
+    /// Left and right rectangles of the rectified frames where every pixel
+    /// has a raw source (OpenCV's `validPixROI1/2`; the whole frame by
+    /// default, as at `alpha = 0`): the wholly-inside test of a length
+    /// keeps `inside_margin` from their edges ([`wholly_inside_valid`]).
+    pub valid: [Roi; 2],
 }
 
 impl PipelineConfig {
@@ -110,6 +116,7 @@ impl PipelineConfig {
             pairing: PairingLimits::default(),
             length: LengthConfig::default(),
             inside_margin: 2,
+            valid: [Roi::new(0, 0, width, height); 2],
         }
     }
 }
@@ -483,7 +490,6 @@ impl<
         stage(sink, Stage::Pair);
 
         self.lengths.clear();
-        let (w, h) = (left.width() as u32, left.height() as u32);
         for p in self.pairs.pairs.iter() {
             // a fish cut by a border has no length to measure (Section IV.D.2)
             let inside = match (
@@ -491,7 +497,7 @@ impl<
                 self.right.items.get(p.right as usize),
             ) {
                 (Some(lo), Some(ro)) => {
-                    wholly_inside(&lo.bbox, &ro.bbox, w, h, self.cfg.inside_margin)
+                    wholly_inside_valid(&lo.bbox, &ro.bbox, &self.cfg.valid, self.cfg.inside_margin)
                 }
                 _ => false,
             };
@@ -550,7 +556,12 @@ impl<
                     right_box: ro.bbox,
                     pair: p,
                     length,
-                    wholly_inside: wholly_inside(&lo.bbox, &ro.bbox, w, h, self.cfg.inside_margin),
+                    wholly_inside: wholly_inside_valid(
+                        &lo.bbox,
+                        &ro.bbox,
+                        &self.cfg.valid,
+                        self.cfg.inside_margin,
+                    ),
                 })
             });
             let depth = stereo.and_then(|s| self.cfg.geometry.depth(s.pair.d_o));

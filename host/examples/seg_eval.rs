@@ -7,7 +7,7 @@
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
 //!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
-//!     [--out DIR] HAUL...
+//!     [--alpha A] [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
 //! gradient with one global threshold, literal θ_V, no elongation test, no
@@ -17,7 +17,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use fishtrack::detect::detect_haul;
+use fishtrack::detect::detect_haul_alpha;
 use fishtrack::eval::evaluate;
 use fishtrack_core::params::Params;
 
@@ -32,6 +32,7 @@ fn main() -> Result<()> {
     let mut csig: Option<f32> = None;
     let mut out = std::env::temp_dir().join("seg_eval");
     let mut hauls = Vec::new();
+    let mut alpha = fishtrack::rectify::DEFAULT_ALPHA;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--single" => single = true,
@@ -47,6 +48,7 @@ fn main() -> Result<()> {
             "--smooth" => smooth = Some(args.next().context("--smooth K")?.parse()?),
             "--elong" => elong = Some(args.next().context("--elong X")?.parse()?),
             "--bins" => bins = Some(args.next().context("--bins N")?.parse::<u8>()?),
+            "--alpha" => alpha = args.next().context("--alpha A")?.parse()?,
             "--out" => out = PathBuf::from(args.next().context("--out DIR")?),
             s if s.starts_with("--") => bail!("unknown option {s}"),
             _ => hauls.push(PathBuf::from(a)),
@@ -101,7 +103,7 @@ fn main() -> Result<()> {
             .file_name()
             .map_or("haul".into(), |n| n.to_string_lossy().into_owned());
         let od = out.join(&name);
-        let sum = detect_haul(haul, &p, &od)?;
+        let sum = detect_haul_alpha(haul, &p, alpha, &od)?;
         let rep = evaluate(haul, &od)?;
         let seg = rep.segmentation.context("no segmentation score")?;
         let d = &seg.detection;

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
-use fishtrack_core::length::wholly_inside;
+use fishtrack_core::length::wholly_inside_valid;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
 use crate::reference::compare::compare_segmentation;
@@ -112,7 +112,7 @@ pub fn run(dir: &Path) -> Result<()> {
                     pipe.right_objects().items.get(p.right),
                 ) {
                     (Some(a), Some(b)) => {
-                        wholly_inside(&a.bbox, &b.bbox, l.width(), l.height(), cfg.inside_margin)
+                        wholly_inside_valid(&a.bbox, &b.bbox, &cfg.valid, cfg.inside_margin)
                     }
                     _ => false,
                 };

@@ -65,12 +65,16 @@ pub fn detection_rows<const N: usize, const R: usize>(
     for o in objs.items.iter() {
         let b = o.bbox;
         // pixel-edge box: pixel x covers [x − 0.5, x + 0.5]
-        let (x0, y0, x1, y1) = cam.rect_box_to_raw(
+        let (x0, y0, x1, y1) = cam.rect_box_to_raw_clipped(
             b.x as f64 - 0.5,
             b.y as f64 - 0.5,
             b.right() as f64 - 0.5,
             b.bottom() as f64 - 0.5,
         );
+        if x1 <= x0 || y1 <= y0 {
+            // wholly in the fill of an alpha > 0 rectification
+            continue;
+        }
         let ob = &o.obb;
         let (c, s) = ((ob.angle as f64).cos(), (ob.angle as f64).sin());
         let hw = ob.half_w as f64;
@@ -91,10 +95,21 @@ pub fn detection_rows<const N: usize, const R: usize>(
 /// Segments every left frame of `haul_dir` with `params` (already scaled to
 /// the frame size) and writes `out_dir/detections.csv`.
 pub fn detect_haul(haul_dir: &Path, params: &Params, out_dir: &Path) -> Result<DetectSummary> {
+    detect_haul_alpha(haul_dir, params, crate::rectify::DEFAULT_ALPHA, out_dir)
+}
+
+/// [`detect_haul`] with the rectification's free scaling `alpha`
+/// ([`Rectifier::with_alpha`]).
+pub fn detect_haul_alpha(
+    haul_dir: &Path,
+    params: &Params,
+    alpha: f64,
+    out_dir: &Path,
+) -> Result<DetectSummary> {
     let haul = Haul::open(haul_dir)?;
     let calib = load_calibration(&haul)?;
     let (w, h) = (calib.width as usize, calib.height as usize);
-    let rect = Rectifier::new(&calib);
+    let rect = Rectifier::with_alpha(&calib, alpha);
     let left_map: &FixedMap = &rect.left_map;
     let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
     let mut objs: Box<Objects<MAX_OBJECTS, MAX_RUNS>> = Box::default();

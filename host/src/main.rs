@@ -66,6 +66,11 @@ enum Command {
         /// Data association: viterbi, mc or nn (default: the parameters', viterbi).
         #[arg(long)]
         tracker: Option<String>,
+        /// Rectification free scaling (OpenCV stereoRectify alpha): 0 keeps
+        /// only valid pixels, 1 keeps the whole raw views, -1 is OpenCV's
+        /// default scaling (default: fishtrack::rectify::DEFAULT_ALPHA).
+        #[arg(long, allow_negative_numbers = true)]
+        rect_alpha: Option<f64>,
     },
     /// Score a tracker output directory against HAUL/truth.json.
     Eval {
@@ -141,6 +146,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             params,
             overlays,
             tracker,
+            rect_alpha,
         } => fishtrack::track_cmd::run(
             &haul,
             &out,
@@ -148,6 +154,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 params,
                 tracker,
                 overlays,
+                rect_alpha,
             },
         ),
         Command::Eval { haul, out, json } => {

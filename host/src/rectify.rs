@@ -160,6 +160,19 @@ pub fn rodrigues_mat_to_vec(m: &Matrix3<f64>) -> Vector3<f64> {
     v * (theta / (2.0 * s))
 }
 
+/// The rectification's default free scaling (OpenCV `alpha`), used by
+/// [`Rectifier::new`] and every command unless `--rect-alpha` says
+/// otherwise. DESIGN.md asks for `alpha = 0` (only valid pixels), which
+/// crops a 5–260 px strip of the raw views away, and with it the fish
+/// entering and leaving there; 0.25 keeps part of that strip at a 3–5 %
+/// smaller focal length and was the only value of 0, 0.25, 0.5, 0.75, 1, −1
+/// that improved segmentation, tracking and both 3-D length figures on
+/// seeds 1–8 pooled (README "Input: a haul directory").
+pub const DEFAULT_ALPHA: f64 = 0.25;
+
+/// The fill of the [`Rectifier`]'s tables.
+pub const RECTIFIER_FILL: Fill = Fill::Reflect101;
+
 /// Result of [`stereo_rectify`]: OpenCV's `R1 R2 P1 P2 Q`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rectification {
@@ -176,6 +189,12 @@ pub struct Rectification {
     /// True when the baseline is vertical (OpenCV `idx == 1`): disparity
     /// is then along y.
     pub vertical: bool,
+    /// OpenCV's `validPixROI1` `(x, y, w, h)`: the left rectified image's
+    /// rectangle where every pixel has a source (the whole frame at
+    /// `alpha = 0`).
+    pub roi1: [u32; 4],
+    /// OpenCV's `validPixROI2`, the same for the right image.
+    pub roi2: [u32; 4],
 }
 
 /// OpenCV's `getUndistortRectangles`: the border points of a 9×9 grid over
@@ -249,6 +268,18 @@ fn undistort_rectangles(
 /// Bouguet rectification, equal to OpenCV `stereoRectify` with
 /// `flags = CALIB_ZERO_DISPARITY`, `alpha = 0`, `newImageSize = imageSize`.
 pub fn stereo_rectify(c: &StereoCalib) -> Rectification {
+    stereo_rectify_alpha(c, 0.0)
+}
+
+/// Bouguet rectification, equal to OpenCV `stereoRectify` with
+/// `flags = CALIB_ZERO_DISPARITY`, `newImageSize = imageSize` and the free
+/// scaling `alpha`: 0 keeps only valid pixels (the inner rectangles of both
+/// undistorted images fill the frame), 1 keeps every source pixel of both
+/// cameras (the outer rectangles fit in the frame; the corners then hold
+/// pixels with no source), values between interpolate the scale linearly,
+/// and a negative `alpha` is OpenCV's "default scaling" (the mean focal
+/// length, unscaled).
+pub fn stereo_rectify_alpha(c: &StereoCalib, alpha: f64) -> Rectification {
     let k1 = StereoCalib::dist8(&c.d1);
     let k2 = StereoCalib::dist8(&c.d2);
     let (nx, ny) = (c.width as f64, c.height as f64);
@@ -316,9 +347,11 @@ pub fn stereo_rectify(c: &StereoCalib) -> Rectification {
     p2[(1, 2)] = cc_new[1].1;
     p2[(idx, 3)] = t_idx * fc_new;
 
-    // alpha = 0: scale so that the whole rectified image holds valid pixels
-    let (in1, _) = undistort_rectangles(&c.m1, &k1, &r1, &p1, c.width, c.height);
-    let (in2, _) = undistort_rectangles(&c.m2, &k2, &r2, &p2, c.width, c.height);
+    // alpha = 0: scale so that the whole rectified image holds valid
+    // pixels (s0, inner rectangles); alpha = 1: so that every source pixel
+    // is kept (s1, outer rectangles); OpenCV interpolates the two scales
+    let (in1, out1) = undistort_rectangles(&c.m1, &k1, &r1, &p1, c.width, c.height);
+    let (in2, out2) = undistort_rectangles(&c.m2, &k2, &r2, &p2, c.width, c.height);
     let (wn, hn) = (nx, ny);
     let (cx1_0, cy1_0, cx2_0, cy2_0) = (cc_new[0].0, cc_new[0].1, cc_new[1].0, cc_new[1].1);
     let cx1 = wn * cx1_0 / nx;
@@ -331,7 +364,19 @@ pub fn stereo_rectify(c: &StereoCalib) -> Rectification {
             .max((wn - 1.0 - cx) / (r[0] + r[2] - cx0))
             .max((hn - 1.0 - cy) / (r[1] + r[3] - cy0))
     };
-    let s = s_of(cx2, cy2, cx2_0, cy2_0, &in2).max(s_of(cx1, cy1, cx1_0, cy1_0, &in1));
+    let s1_of = |cx: f64, cy: f64, cx0: f64, cy0: f64, r: &[f64; 4]| {
+        (cx / (cx0 - r[0]))
+            .min(cy / (cy0 - r[1]))
+            .min((wn - 1.0 - cx) / (r[0] + r[2] - cx0))
+            .min((hn - 1.0 - cy) / (r[1] + r[3] - cy0))
+    };
+    let s0 = s_of(cx2, cy2, cx2_0, cy2_0, &in2).max(s_of(cx1, cy1, cx1_0, cy1_0, &in1));
+    let s1 = s1_of(cx2, cy2, cx2_0, cy2_0, &out2).min(s1_of(cx1, cy1, cx1_0, cy1_0, &out1));
+    let s = if alpha >= 0.0 {
+        s0 * (1.0 - alpha) + s1 * alpha
+    } else {
+        1.0
+    };
 
     fc_new *= s;
     p2[(0, 0)] = fc_new;
@@ -344,6 +389,24 @@ pub fn stereo_rectify(c: &StereoCalib) -> Rectification {
     p1[(0, 2)] = cx1;
     p1[(1, 2)] = cy1;
     p1[(idx, 3)] = 0.0;
+
+    // OpenCV's valid-pixel rectangles: the inner rectangles, scaled,
+    // intersected with the frame (`alpha = 0` puts a side exactly on the
+    // frame edge: 1e-7 px of slack keeps round-off from moving it by one)
+    let roi = |r: &[f64; 4], cx0: f64, cy0: f64, cx: f64, cy: f64| -> [u32; 4] {
+        const EPS: f64 = 1e-7;
+        let x0 = ((r[0] - cx0) * s + cx - EPS).ceil();
+        let y0 = ((r[1] - cy0) * s + cy - EPS).ceil();
+        let (x1, y1) = (x0 + (r[2] * s + EPS).floor(), y0 + (r[3] * s + EPS).floor());
+        let (ax, ay) = (x0.clamp(0.0, wn), y0.clamp(0.0, hn));
+        let (bx, by) = (x1.clamp(0.0, wn), y1.clamp(0.0, hn));
+        if bx <= ax || by <= ay {
+            return [0; 4];
+        }
+        [ax as u32, ay as u32, (bx - ax) as u32, (by - ay) as u32]
+    };
+    let roi1 = roi(&in1, cx1_0, cy1_0, cx1, cy1);
+    let roi2 = roi(&in2, cx2_0, cy2_0, cx2, cy2);
 
     let dcc = if idx == 0 { cx1 - cx2 } else { cy1 - cy2 };
     let q = Matrix4::new(
@@ -371,6 +434,8 @@ pub fn stereo_rectify(c: &StereoCalib) -> Rectification {
         p2,
         q,
         vertical: idx == 1,
+        roi1,
+        roi2,
     }
 }
 
@@ -495,6 +560,24 @@ impl RectifiedCamera {
         b
     }
 
+    /// [`RectifiedCamera::rect_box_to_raw`] clipped to the raw image
+    /// (`[−½, w − ½] × [−½, h − ½]` in pixel-centre coordinates): the part
+    /// of a rectified box beyond the raw frame shows the [`Fill`], not the
+    /// scene.
+    pub fn rect_box_to_raw_clipped(
+        &self,
+        x0: f64,
+        y0: f64,
+        x1: f64,
+        y1: f64,
+    ) -> (f64, f64, f64, f64) {
+        let (a, b, c, d) = self.rect_box_to_raw(x0, y0, x1, y1);
+        let (w, h) = (self.width as f64 - 0.5, self.height as f64 - 0.5);
+        let cx = |v: f64| v.clamp(-0.5, w);
+        let cy = |v: f64| v.clamp(-0.5, h);
+        (cx(a), cy(b), cx(c), cy(d))
+    }
+
     /// The float maps of `cv2.initUndistortRectifyMap(M, D, R, P, size, CV_32FC1)`.
     pub fn float_map(&self) -> RectifyMap {
         use rayon::prelude::*;
@@ -571,9 +654,27 @@ impl FixedMap {
     /// Output rows per parallel band of [`FixedMap::apply`].
     pub const BAND_ROWS: usize = 64;
 
-    /// Quantizes float maps.
+    /// Quantizes float maps (neighbours outside the source read as 0, as
+    /// `cv2.remap(..., BORDER_CONSTANT)`).
     pub fn from_float(map: &RectifyMap) -> Self {
+        Self::from_float_fill(map, Fill::Constant, 0, 0)
+    }
+
+    /// Quantizes float maps with the fill `fill` for rectified pixels
+    /// whose source lies outside the `src_w × src_h` raw image (see
+    /// [`Fill`]): the source coordinates are folded into the image before
+    /// quantizing, so the core's remap is unchanged.
+    pub fn from_float_fill(map: &RectifyMap, fill: Fill, src_w: u32, src_h: u32) -> Self {
         let n = map.map_x.len();
+        let fold = |v: f32, side: u32| -> f32 { fill.fold(v, side) };
+        let (cw, ch) = (src_w, src_h);
+        let clamp = |v: f32, side: u32| -> f32 {
+            if v.is_nan() {
+                v // NaN stays NaN (`OUTSIDE`)
+            } else {
+                fold(v, side)
+            }
+        };
         let mut xy = vec![0i16; 2 * n];
         let mut frac = vec![0u16; n];
         let q = |v: f32| -> i32 {
@@ -585,7 +686,8 @@ impl FixedMap {
             }
         };
         for i in 0..n {
-            let (p, f) = remap::pack(q(map.map_x[i]), q(map.map_y[i]));
+            let (x, y) = (clamp(map.map_x[i], cw), clamp(map.map_y[i], ch));
+            let (p, f) = remap::pack(q(x), q(y));
             xy[2 * i] = p[0];
             xy[2 * i + 1] = p[1];
             frac[i] = f;
@@ -638,6 +740,55 @@ impl FixedMap {
     }
 }
 
+/// What a rectified pixel whose source lies outside the raw image shows.
+/// The rectification keeps only valid pixels at `alpha = 0`; at `alpha > 0`
+/// the frame's corners and edge wedges have no source.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fill {
+    /// 0 (`cv2.BORDER_CONSTANT`): the fill's edge against the water is an
+    /// edge the segmentation picks up.
+    Constant,
+    /// The nearest edge pixel (`cv2.BORDER_REPLICATE`; bilinear
+    /// interpolation of a replicated border at `x` equals that at
+    /// `clamp(x, 0, w − 1)`): the edge pixels' noise is drawn out into
+    /// streaks perpendicular to the edge, which segment as elongated
+    /// objects.
+    Replicate,
+    /// The raw image mirrored about its edge pixels
+    /// (`cv2.BORDER_REFLECT_101`; bilinear interpolation of that border at
+    /// `x < 0` equals that at `−x`, and at `x > w − 1` that at
+    /// `2(w − 1) − x`): the water's texture, noise and glow continue
+    /// across the edge without a step or streaks; a fish cut by the edge
+    /// meets its mirror image, so its box is clipped to the raw frame when
+    /// mapped back ([`RectifiedCamera::rect_box_to_raw_clipped`]).
+    Reflect101,
+}
+
+impl Fill {
+    /// The raw coordinate a source coordinate `v` on a side of `n` pixels
+    /// reads under this fill (unchanged for `Constant`).
+    pub fn fold(self, v: f32, n: u32) -> f32 {
+        let hi = n.saturating_sub(1) as f32;
+        match self {
+            Fill::Constant => v,
+            Fill::Replicate => v.max(0.0).min(hi),
+            Fill::Reflect101 => {
+                if hi <= 0.0 {
+                    return 0.0;
+                }
+                // period 2(n − 1); one fold covers any |v| < 2(n − 1)
+                let p = 2.0 * hi;
+                let r = v.rem_euclid(p);
+                if r > hi {
+                    p - r
+                } else {
+                    r
+                }
+            }
+        }
+    }
+}
+
 /// Rectifies raw left/right frame pairs of one calibration with the core's
 /// fixed-point remap.
 #[derive(Debug, Clone)]
@@ -654,16 +805,28 @@ pub struct Rectifier {
     pub left_map: FixedMap,
     /// Right fixed-point table.
     pub right_map: FixedMap,
+    /// The free scaling the rectification was computed with.
+    pub alpha: f64,
 }
 
 impl Rectifier {
-    /// Computes the rectification and both remap tables.
+    /// Computes the rectification with [`DEFAULT_ALPHA`] and both remap
+    /// tables.
     pub fn new(calib: &StereoCalib) -> Self {
-        let rect = stereo_rectify(calib);
+        Self::with_alpha(calib, DEFAULT_ALPHA)
+    }
+
+    /// Computes the rectification with OpenCV's free scaling `alpha` (see
+    /// [`stereo_rectify_alpha`]) and both remap tables; rectified pixels
+    /// with no source show the raw image mirrored about its edge
+    /// ([`Fill::Reflect101`]).
+    pub fn with_alpha(calib: &StereoCalib, alpha: f64) -> Self {
+        let rect = stereo_rectify_alpha(calib, alpha);
         let (left, right) = RectifiedCamera::pair(calib, &rect);
+        let (w, h) = (calib.width, calib.height);
         let (left_map, right_map) = rayon::join(
-            || FixedMap::from_float(&left.float_map()),
-            || FixedMap::from_float(&right.float_map()),
+            || FixedMap::from_float_fill(&left.float_map(), RECTIFIER_FILL, w, h),
+            || FixedMap::from_float_fill(&right.float_map(), RECTIFIER_FILL, w, h),
         );
         Rectifier {
             calib: calib.clone(),
@@ -672,7 +835,24 @@ impl Rectifier {
             right,
             left_map,
             right_map,
+            alpha,
         }
+    }
+
+    /// The left and right rectangles of the rectified frames where every
+    /// pixel has a raw source, as core rectangles: OpenCV's `roi1`, `roi2`
+    /// when `alpha ≠ 0`, the whole frame at `alpha = 0` (every pixel has a
+    /// source by construction; OpenCV's rounding may drop the last row).
+    pub fn valid_rois(&self) -> [fishtrack_core::Roi; 2] {
+        let (w, h) = (self.calib.width, self.calib.height);
+        let r = |v: [u32; 4]| {
+            if self.alpha == 0.0 {
+                fishtrack_core::Roi::new(0, 0, w, h)
+            } else {
+                fishtrack_core::Roi::new(v[0], v[1], v[2], v[3])
+            }
+        };
+        [r(self.rect.roi1), r(self.rect.roi2)]
     }
 
     /// Rectifies a raw frame pair (each must have the calibration's size).
@@ -711,6 +891,95 @@ mod tests {
         let v = Vector3::new(0.0, std::f64::consts::PI, 0.0);
         let back = rodrigues_mat_to_vec(&rodrigues_vec_to_mat(&v));
         assert!((back.norm() - std::f64::consts::PI).abs() < 1e-9);
+    }
+
+    fn rig() -> StereoCalib {
+        StereoCalib {
+            width: 160,
+            height: 120,
+            m1: Matrix3::new(150.0, 0.0, 79.0, 0.0, 151.0, 60.5, 0.0, 0.0, 1.0),
+            d1: vec![-0.25, 0.08, 0.001, -0.0005, 0.0],
+            m2: Matrix3::new(152.0, 0.0, 81.0, 0.0, 150.0, 59.0, 0.0, 0.0, 1.0),
+            d2: vec![-0.22, 0.06, 0.0, 0.0],
+            r: *nalgebra::Rotation3::from_euler_angles(0.01, -0.05, 0.004).matrix(),
+            t: Vector3::new(-100.0, 1.0, 2.0),
+        }
+    }
+
+    #[test]
+    fn alpha_one_keeps_every_source_pixel_and_fills_the_rest_without_edges() {
+        let c = rig();
+        let (w, h) = (c.width, c.height);
+        let r0 = stereo_rectify_alpha(&c, 0.0);
+        let r1 = stereo_rectify_alpha(&c, 1.0);
+        assert_eq!(r0, stereo_rectify(&c));
+        // alpha = 1 zooms out: a smaller focal length
+        assert!(r1.p1[(0, 0)] < r0.p1[(0, 0)] * 0.98, "{} {}", r1.p1, r0.p1);
+        let (l0, _) = RectifiedCamera::pair(&c, &r0);
+        let (l1, _) = RectifiedCamera::pair(&c, &r1);
+        // the raw frame's edge midpoints lie outside the alpha-0 frame and
+        // inside the alpha-1 frame
+        for (u, v) in [(0.0, 59.5), (159.0, 59.5), (79.5, 0.0), (79.5, 119.0)] {
+            let (x0, y0) = l0.raw_to_rect(u, v).unwrap();
+            let (x1, y1) = l1.raw_to_rect(u, v).unwrap();
+            let inside = |x: f64, y: f64| x >= 0.0 && y >= 0.0 && x <= 159.0 && y <= 119.0;
+            assert!(!inside(x0, y0), "({u}, {v}) -> ({x0}, {y0}) at alpha 0");
+            assert!(inside(x1, y1), "({u}, {v}) -> ({x1}, {y1}) at alpha 1");
+        }
+        // a uniform raw frame rectifies to a uniform frame with the
+        // replicated fill, to black corners without it
+        let flat = GrayImage::from_pixel(w, h, image::Luma([37]));
+        let map = l1.float_map();
+        for fill in [Fill::Replicate, Fill::Reflect101] {
+            let rep = FixedMap::from_float_fill(&map, fill, w, h)
+                .apply(&flat)
+                .unwrap();
+            assert!(rep.pixels().all(|p| p[0] == 37), "{fill:?}");
+        }
+        let cst = FixedMap::from_float(&map).apply(&flat).unwrap();
+        assert!(cst.pixels().filter(|p| p[0] < 37).count() > 100);
+        // the valid-pixel rectangle is strictly inside at alpha 1, the whole
+        // frame at alpha 0 (OpenCV's floor can lose the last row or column)
+        let [x, y, rw, rh] = r0.roi1;
+        assert!(
+            x == 0 && y == 0 && rw + 1 >= w && rh + 1 >= h,
+            "{:?}",
+            r0.roi1
+        );
+        let [x, y, rw, rh] = r1.roi1;
+        assert!(x > 0 && y > 0 && x + rw < w && y + rh < h, "{:?}", r1.roi1);
+        // every pixel of it has a source
+        for yy in y..y + rh {
+            for xx in x..x + rw {
+                let i = (yy * w + xx) as usize;
+                let (sx, sy) = (map.map_x[i], map.map_y[i]);
+                assert!(sx >= -0.5 && sy >= -0.5 && sx <= 159.5 && sy <= 119.5);
+            }
+        }
+    }
+
+    #[test]
+    fn valid_rectangles_make_boxes_in_the_fill_cut() {
+        use fishtrack_core::length::wholly_inside_valid;
+        use fishtrack_core::Roi;
+        let c = rig();
+        let (w, h) = (c.width, c.height);
+        let full = Roi::new(0, 0, w, h);
+        assert_eq!(Rectifier::with_alpha(&c, 0.0).valid_rois(), [full, full]);
+        let v = Rectifier::with_alpha(&c, 1.0).valid_rois();
+        for r in v {
+            assert!(
+                r.x > 0 && r.y > 0 && r.right() < w && r.bottom() < h,
+                "{r:?}"
+            );
+        }
+        // a box inside the frame but reaching the left fill is cut; the
+        // same box moved inside the valid rectangles is not
+        let b = Roi::new(v[0].x.max(v[1].x) / 2, 50, 20, 10);
+        assert!(wholly_inside_valid(&b, &b, &[full, full], 2));
+        assert!(!wholly_inside_valid(&b, &b, &v, 2));
+        let b2 = Roi::new(v[0].x.max(v[1].x) + 5, 50, 20, 10);
+        assert!(wholly_inside_valid(&b2, &b2, &v, 2));
     }
 
     #[test]

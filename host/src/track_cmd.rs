@@ -57,6 +57,9 @@ pub struct TrackOptions {
     pub tracker: Option<String>,
     /// `--overlays`.
     pub overlays: bool,
+    /// `--rect-alpha A`: the rectification's free scaling
+    /// ([`crate::rectify::DEFAULT_ALPHA`] when absent).
+    pub rect_alpha: Option<f64>,
 }
 
 /// A haul made ready for the pipeline.
@@ -88,6 +91,32 @@ pub fn parse_tracker(s: &str) -> Result<Association, InputError> {
     }
 }
 
+/// Checks `--rect-alpha`: OpenCV's free scaling is in `[0, 1]`, or negative
+/// for its default scaling (taken as −1).
+pub fn check_alpha(a: f64) -> Result<f64, InputError> {
+    if a.is_finite() && a <= 1.0 {
+        Ok(if a < 0.0 { -1.0 } else { a })
+    } else {
+        Err(InputError::plain(
+            "--rect-alpha",
+            format!("{a} is not in [0, 1] (or negative for OpenCV's default scaling)"),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod alpha_tests {
+    #[test]
+    fn rect_alpha_is_checked() {
+        assert_eq!(super::check_alpha(0.25).unwrap(), 0.25);
+        assert_eq!(super::check_alpha(-3.0).unwrap(), -1.0);
+        for bad in [1.5, f64::NAN, f64::INFINITY] {
+            let e = super::check_alpha(bad).unwrap_err().to_string();
+            assert!(e.contains("--rect-alpha"), "{e}");
+        }
+    }
+}
+
 /// Opens `dir` and prepares calibration, rectification, parameters and geometry.
 pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     let haul = Haul::open(dir)?;
@@ -103,7 +132,10 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     })?;
     haul.calibration()?;
     let calib = StereoCalib::load(&haul.dir, Some(size))?;
-    let rectifier = Rectifier::new(&calib);
+    let rectifier = Rectifier::with_alpha(
+        &calib,
+        check_alpha(opts.rect_alpha.unwrap_or(crate::rectify::DEFAULT_ALPHA))?,
+    );
     if rectifier.rect.vertical {
         return Err(InputError::file(
             &haul.dir,
@@ -143,7 +175,9 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
 impl Setup {
     /// The pipeline configuration of this haul.
     pub fn pipeline_config(&self) -> PipelineConfig {
-        PipelineConfig::new(self.params, self.geometry, self.width, self.height)
+        let mut cfg = PipelineConfig::new(self.params, self.geometry, self.width, self.height);
+        cfg.valid = self.rectifier.valid_rois();
+        cfg
     }
 
     /// Loads and rectifies one frame pair.
@@ -175,12 +209,20 @@ pub fn views<'a>(l: &'a GrayImage, r: &'a GrayImage) -> Result<(ImageView<'a>, I
     Ok((lv, rv))
 }
 
-/// A rectified upright box → `[x, y, w, h]` in the camera's raw pixels.
+/// Whether a raw box (from [`raw_box`], clipped to the raw frame) holds
+/// any of the raw view: a box wholly in the fill of an `alpha > 0`
+/// rectification clips to zero width or height.
+pub fn in_raw_view(b: &[f64; 4]) -> bool {
+    b[2] > 0.0 && b[3] > 0.0
+}
+
+/// A rectified upright box → `[x, y, w, h]` in the camera's raw pixels
+/// (clipped to the raw frame).
 pub fn raw_box(cam: &RectifiedCamera, b: &Roi) -> [f64; 4] {
     // pixel indices x..x+w−1: outline x−½ .. x+w−½
     let (x0, y0) = (b.x as f64 - 0.5, b.y as f64 - 0.5);
     let (x1, y1) = (x0 + b.w as f64, y0 + b.h as f64);
-    let (a, c, d, e) = cam.rect_box_to_raw(x0, y0, x1, y1);
+    let (a, c, d, e) = cam.rect_box_to_raw_clipped(x0, y0, x1, y1);
     [a + 0.5, c + 0.5, (d - a).max(0.0), (e - c).max(0.0)]
 }
 
@@ -357,6 +399,10 @@ fn write_outputs(
                 ..
             } => {
                 let lb = raw_box(&rect.left, &bbox);
+                if !in_raw_view(&lb) {
+                    // wholly in the fill of an alpha > 0 rectification
+                    continue;
+                }
                 let (c, s) = (obb.angle.cos() as f64, obb.angle.sin() as f64);
                 let hw = obb.half_w as f64;
                 let (cx, cy) = (obb.cx as f64, obb.cy as f64);
@@ -423,6 +469,11 @@ fn write_outputs(
             PipelineEvent::StageDone { .. } | PipelineEvent::FrameDone { .. } => {}
         }
     }
+    // rows wholly in the fill (alpha > 0) are not in the raw view; a track
+    // never in it is no fish
+    tracks.retain(|r| in_raw_view(&r.bbox));
+    let seen: BTreeSet<_> = tracks.iter().map(|r| r.id).collect();
+    fish.retain(|f| seen.contains(&f.track_id) && !duplicates.contains(&f.track_id));
     tracks.retain(|r| !duplicates.contains(&r.id));
     tracks.sort_by_key(|r| (r.frame, r.id));
     fish.sort_by_key(|f| f.track_id);

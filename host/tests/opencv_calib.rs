@@ -2,15 +2,19 @@
 //!
 //! `scripts/opencv_fixtures.py` (cv2 + numpy) writes stereo calibrations in
 //! every layout FishTrack reads and OpenCV's own results: `stereoRectify`
-//! (`CALIB_ZERO_DISPARITY`, `alpha = 0`), `initUndistortRectifyMap` +
-//! `remap` of a test image, and `undistortPoints` point pairs. These tests
+//! (`CALIB_ZERO_DISPARITY`, `alpha` = 0, 1 and −1), `initUndistortRectifyMap`
+//! and `remap` of a test image (`BORDER_CONSTANT` and `BORDER_REPLICATE`), and
+//! `undistortPoints` point pairs. These tests
 //! check, for a horizontal 5-coefficient pair, a vertical pair, the
 //! 8-coefficient rational model and a 4-coefficient pair:
 //! - every layout loads to the same model, equal to the one OpenCV wrote;
 //! - `R1 R2 P1 P2 Q` within 1e-6 relative (entries smaller than 1e-3 of the
-//!   matrix's largest are compared absolutely against 1e-6 of that 1e-3);
+//!   matrix's largest are compared absolutely against 1e-6 of that 1e-3),
+//!   and the valid-pixel rectangles `roi1 roi2` equal, for every alpha;
 //! - rectified images within 1 grey level on ≥ 99.9 % of pixels, for the
-//!   float remap and for the core's fixed-point remap;
+//!   float remap and for the core's fixed-point remap; the fills of pixels
+//!   without a source likewise against `BORDER_REPLICATE` and
+//!   `BORDER_REFLECT_101` (the [`Rectifier`]'s);
 //! - raw → rectified agrees with `cv2.undistortPoints`, and raw → rectified
 //!   → raw returns within 0.05 px.
 //!
@@ -25,7 +29,9 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use fishtrack::calib::StereoCalib;
-use fishtrack::rectify::{stereo_rectify, FixedMap, Rectification, RectifiedCamera, Rectifier};
+use fishtrack::rectify::{
+    stereo_rectify, stereo_rectify_alpha, Fill, FixedMap, Rectification, RectifiedCamera, Rectifier,
+};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde_json::Value;
 
@@ -70,8 +76,15 @@ fn fixtures() -> Option<&'static Path> {
     .map(|f| f.root.as_path())
 }
 
+/// The alphas the fixtures hold, with their file-name suffixes.
+const ALPHAS: &[(f64, &str)] = &[(0.0, ""), (1.0, "_a1"), (-1.0, "_am1")];
+
 fn json(case_dir: &Path) -> Value {
-    let text = std::fs::read_to_string(case_dir.join("reference.json")).unwrap();
+    json_tag(case_dir, "")
+}
+
+fn json_tag(case_dir: &Path, tag: &str) -> Value {
+    let text = std::fs::read_to_string(case_dir.join(format!("reference{tag}.json"))).unwrap();
     serde_json::from_str(&text).unwrap()
 }
 
@@ -257,6 +270,8 @@ struct Figures {
     float_within1: [f64; 2],
     fixed_within1: [f64; 2],
     fixed_exact: [f64; 2],
+    replicate_within1: [f64; 2],
+    reflect_within1: [f64; 2],
     max_map_diff: f64,
     max_point_err: f64,
     max_round_trip: f64,
@@ -286,8 +301,18 @@ fn read_map(p: &Path, w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
 /// Compares everything for one case with `calib` (possibly perturbed);
 /// returns the figures and the list of violated tolerances.
 fn compare(case_dir: &Path, calib: &StereoCalib) -> (Figures, Vec<String>) {
-    let r = json(case_dir);
-    let rect: Rectification = stereo_rectify(calib);
+    compare_alpha(case_dir, calib, 0.0, "")
+}
+
+/// [`compare`] for the free scaling `alpha` (fixture files suffixed `tag`).
+fn compare_alpha(
+    case_dir: &Path,
+    calib: &StereoCalib,
+    alpha: f64,
+    tag: &str,
+) -> (Figures, Vec<String>) {
+    let r = json_tag(case_dir, tag);
+    let rect: Rectification = stereo_rectify_alpha(calib, alpha);
     let mut f = Figures::default();
     let mut fails = Vec::new();
     let got = [
@@ -306,13 +331,19 @@ fn compare(case_dir: &Path, calib: &StereoCalib) -> (Figures, Vec<String>) {
             ));
         }
     }
+    for (name, got) in [("roi1", rect.roi1), ("roi2", rect.roi2)] {
+        let want: Vec<u32> = vec_of(&r[name]).iter().map(|v| *v as u32).collect();
+        if got.as_slice() != want.as_slice() {
+            fails.push(format!("{name}: {got:?} != OpenCV's {want:?}"));
+        }
+    }
     let (left, right) = RectifiedCamera::pair(calib, &rect);
     let src = load_gray(&case_dir.join("left.png"));
     let (w, h) = (calib.width as usize, calib.height as usize);
     for (s, (side, cam)) in [("left", &left), ("right", &right)].into_iter().enumerate() {
-        let cv = load_gray(&case_dir.join(format!("{side}_rect.png")));
+        let cv = load_gray(&case_dir.join(format!("{side}_rect{tag}.png")));
         let map = cam.float_map();
-        let (mx, my) = read_map(&case_dir.join(format!("{side}_map.f32")), w, h);
+        let (mx, my) = read_map(&case_dir.join(format!("{side}_map{tag}.f32")), w, h);
         for i in 0..w * h {
             f.max_map_diff = f
                 .max_map_diff
@@ -324,9 +355,30 @@ fn compare(case_dir: &Path, calib: &StereoCalib) -> (Figures, Vec<String>) {
         let fixed = FixedMap::from_float(&map).apply(&src).unwrap();
         f.fixed_within1[s] = within(&fixed, &cv, 1);
         f.fixed_exact[s] = within(&fixed, &cv, 0);
+        let cv_rep = load_gray(&case_dir.join(format!("{side}_rep{tag}.png")));
+        let rep = FixedMap::from_float_fill(&map, Fill::Replicate, calib.width, calib.height)
+            .apply(&src)
+            .unwrap();
+        f.replicate_within1[s] = within(&rep, &cv_rep, 1);
+        let cv_ref = load_gray(&case_dir.join(format!("{side}_ref{tag}.png")));
+        let refl = FixedMap::from_float_fill(&map, Fill::Reflect101, calib.width, calib.height)
+            .apply(&src)
+            .unwrap();
+        f.reflect_within1[s] = within(&refl, &cv_ref, 1);
+        // OpenCV's own fixed-point maps (convertMaps) differ from its float
+        // maps by > 1 grey level on 0.3 % of the pixels next to the
+        // unmapped region at alpha = 1 (partly outside neighbours): the
+        // constant-border fixed-point check is the alpha = 0 one
+        let fixed_const = if alpha == 0.0 {
+            fixed_pct(&f, s)
+        } else {
+            100.0
+        };
         for (what, v) in [
             ("float", f.float_within1[s]),
-            ("fixed-point", fixed_pct(&f, s)),
+            ("fixed-point", fixed_const),
+            ("replicated fixed-point", f.replicate_within1[s]),
+            ("reflected fixed-point", f.reflect_within1[s]),
         ] {
             if v < 99.9 {
                 fails.push(format!(
@@ -371,19 +423,27 @@ fn fixed_pct(f: &Figures, s: usize) -> f64 {
 fn rectification_remap_and_points_match_opencv() {
     let Some(root) = fixtures() else { return };
     let mut all = Vec::new();
-    for case in CASES {
-        let d = root.join(case);
-        let calib = StereoCalib::load(&d.join("single"), None).unwrap();
-        let (f, fails) = compare(&d, &calib);
-        println!(
-            "{case:12} rel R1 {:.1e} R2 {:.1e} P1 {:.1e} P2 {:.1e} Q {:.1e} | map max diff {:.2e} px | \
-             within 1 grey: float L {:.3}% R {:.3}%, fixed L {:.3}% R {:.3}% (exact L {:.2}% R {:.2}%) | \
-             points vs cv2 {:.2e} px, round trip {:.2e} px",
-            f.rel[0], f.rel[1], f.rel[2], f.rel[3], f.rel[4], f.max_map_diff,
-            f.float_within1[0], f.float_within1[1], f.fixed_within1[0], f.fixed_within1[1],
-            f.fixed_exact[0], f.fixed_exact[1], f.max_point_err, f.max_round_trip
-        );
-        all.extend(fails.into_iter().map(|m| format!("{case}: {m}")));
+    for &(alpha, tag) in ALPHAS {
+        for case in CASES {
+            let d = root.join(case);
+            let calib = StereoCalib::load(&d.join("single"), None).unwrap();
+            let (f, fails) = compare_alpha(&d, &calib, alpha, tag);
+            println!(
+                "alpha {alpha:2} {case:12} rel R1 {:.1e} R2 {:.1e} P1 {:.1e} P2 {:.1e} Q {:.1e} | map max diff {:.2e} px | \
+                 within 1 grey: float L {:.3}% R {:.3}%, fixed L {:.3}% R {:.3}% (exact L {:.2}% R {:.2}%), \
+                 replicated L {:.3}% R {:.3}%, reflected L {:.3}% R {:.3}% | points vs cv2 {:.2e} px, round trip {:.2e} px",
+                f.rel[0], f.rel[1], f.rel[2], f.rel[3], f.rel[4], f.max_map_diff,
+                f.float_within1[0], f.float_within1[1], f.fixed_within1[0], f.fixed_within1[1],
+                f.fixed_exact[0], f.fixed_exact[1], f.replicate_within1[0],
+                f.replicate_within1[1], f.reflect_within1[0], f.reflect_within1[1],
+                f.max_point_err, f.max_round_trip
+            );
+            all.extend(
+                fails
+                    .into_iter()
+                    .map(|m| format!("alpha {alpha} {case}: {m}")),
+            );
+        }
     }
     assert!(
         all.is_empty(),
@@ -436,18 +496,33 @@ fn rectifier_and_box_mapping_agree_with_opencv_points() {
     let Some(root) = fixtures() else { return };
     let d = root.join("horizontal5");
     let calib = StereoCalib::load(&d.join("single"), None).unwrap();
-    let rectifier = Rectifier::new(&calib);
+    for &(alpha, tag) in ALPHAS {
+        check_rectifier(&d, &calib, alpha, tag);
+    }
+}
+
+fn check_rectifier(d: &Path, calib: &StereoCalib, alpha: f64, tag: &str) {
+    let rectifier = Rectifier::with_alpha(calib, alpha);
     let img = load_gray(&d.join("left.png"));
     let (l, r) = rectifier.rectify_pair(&img, &img).unwrap();
-    assert!(within(&l, &load_gray(&d.join("left_rect.png")), 1) >= 99.9);
-    assert!(within(&r, &load_gray(&d.join("right_rect.png")), 1) >= 99.9);
+    // the Rectifier fills pixels without a source as BORDER_REFLECT_101 does
+    let (wl, wr) = (
+        within(&l, &load_gray(&d.join(format!("left_ref{tag}.png"))), 1),
+        within(&r, &load_gray(&d.join(format!("right_ref{tag}.png"))), 1),
+    );
+    assert!(wl >= 99.9 && wr >= 99.9, "alpha {alpha}: {wl} {wr}");
+    if alpha == 0.0 {
+        // no pixel without a source: the same as BORDER_CONSTANT
+        assert!(within(&l, &load_gray(&d.join("left_rect.png")), 1) >= 99.9);
+        assert!(within(&r, &load_gray(&d.join("right_rect.png")), 1) >= 99.9);
+    }
     assert!(rectifier
         .rectify_pair(&img, &image::GrayImage::new(3, 3))
         .is_err());
 
     // A rectified box around OpenCV's rectified points maps back to a raw
     // box holding the raw points.
-    let j = json(&d);
+    let j = json_tag(d, tag);
     let raw = j["left_raw"].as_array().unwrap();
     let rect = j["left_rect"].as_array().unwrap();
     for k in (0..raw.len() - 9).step_by(10) {
