@@ -84,7 +84,10 @@ pub fn detection_rows<const N: usize, const R: usize>(
         let len = ((p.0 - q.0).powi(2) + (p.1 - q.1).powi(2)).sqrt();
         rows.push(DetectionRow {
             frame,
-            bbox: [x0, y0, x1 - x0, y1 - y0],
+            // index coordinates (pixel centre at an integer) → the raw
+            // frame's pixel-edge convention (centres at integer + 0.5), as
+            // `truth.json` and `track_cmd::raw_box` use
+            bbox: [x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0],
             conf: 1.0,
             length_px: len.is_finite().then_some(len),
         });
