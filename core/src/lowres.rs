@@ -222,10 +222,14 @@ pub fn gradient_disk_u16(
     let r = disk.radius.min(R);
     // half-width of row dy (clamped to r: the element spans −r..=r)
     let hw = |dy: isize| disk.half_width(dy).min(r);
-    let mut vmax = [0u16; CHUNK + 2 * R];
-    let mut vmin = [u16::MAX; CHUNK + 2 * R];
-    let mut amax = [0u16; CHUNK];
-    let mut amin = [u16::MAX; CHUNK];
+    // values are compared as i16 after flipping the top bit (an
+    // order-preserving map of u16 onto i16): baseline SSE2 has signed
+    // 16-bit max/min but not unsigned ones; max − min is unchanged
+    const FLIP: u16 = 0x8000;
+    let mut vmax = [i16::MIN; CHUNK + 2 * R];
+    let mut vmin = [i16::MAX; CHUNK + 2 * R];
+    let mut amax = [i16::MIN; CHUNK];
+    let mut amin = [i16::MAX; CHUNK];
     for (y, drow) in dst.chunks_exact_mut(width.max(1)).enumerate().take(height) {
         let mut x0 = 0usize;
         while x0 < width {
@@ -233,15 +237,17 @@ pub fn gradient_disk_u16(
             let m = x1 - x0;
             // v[i] holds column x0 − r + i, i in 0..m + 2r
             let (vmax, vmin) = (&mut vmax[..m + 2 * r], &mut vmin[..m + 2 * r]);
-            vmax.fill(0);
-            vmin.fill(u16::MAX);
             let (amax, amin) = (&mut amax[..m], &mut amin[..m]);
-            amax.fill(0);
-            amin.fill(u16::MAX);
             // columns of the chunk's padded span that lie inside the image
             let ca = x0.saturating_sub(r);
             let cb = (x1 + r).min(width);
             let off = ca + r - x0; // index in v of column ca
+                                   // the padding outside the image holds the identities
+            vmax[..off].fill(i16::MIN);
+            vmin[..off].fill(i16::MAX);
+            vmax[off + (cb - ca)..].fill(i16::MIN);
+            vmin[off + (cb - ca)..].fill(i16::MAX);
+            let (mut v_started, mut a_started) = (false, false);
             for t in (0..=r).rev() {
                 let mut added = false;
                 for dy in -(r as isize)..=(r as isize) {
@@ -255,9 +261,19 @@ pub fn gradient_disk_u16(
                         vmax.get_mut(off..off + (cb - ca)),
                         vmin.get_mut(off..off + (cb - ca)),
                     ) {
-                        for ((a, b), &p) in vx.iter_mut().zip(vn.iter_mut()).zip(row) {
-                            *a = (*a).max(p);
-                            *b = (*b).min(p);
+                        if v_started {
+                            for ((a, b), &p) in vx.iter_mut().zip(vn.iter_mut()).zip(row) {
+                                let p = (p ^ FLIP) as i16;
+                                *a = (*a).max(p);
+                                *b = (*b).min(p);
+                            }
+                        } else {
+                            for ((a, b), &p) in vx.iter_mut().zip(vn.iter_mut()).zip(row) {
+                                let p = (p ^ FLIP) as i16;
+                                *a = p;
+                                *b = p;
+                            }
+                            v_started = true;
                         }
                         added = true;
                     }
@@ -268,18 +284,28 @@ pub fn gradient_disk_u16(
                 // output i covers v[i + r − t ..= i + r + t]
                 for k in r - t..=r + t {
                     if let (Some(vx), Some(vn)) = (vmax.get(k..k + m), vmin.get(k..k + m)) {
-                        for (((a, b), &p), &q) in
-                            amax.iter_mut().zip(amin.iter_mut()).zip(vx).zip(vn)
-                        {
-                            *a = (*a).max(p);
-                            *b = (*b).min(q);
+                        if a_started {
+                            for (((a, b), &p), &q) in
+                                amax.iter_mut().zip(amin.iter_mut()).zip(vx).zip(vn)
+                            {
+                                *a = (*a).max(p);
+                                *b = (*b).min(q);
+                            }
+                        } else {
+                            amax.copy_from_slice(vx);
+                            amin.copy_from_slice(vn);
+                            a_started = true;
                         }
                     }
                 }
             }
             if let Some(d) = drow.get_mut(x0..x1) {
-                for ((o, &a), &b) in d.iter_mut().zip(amax.iter()).zip(amin.iter()) {
-                    *o = a.saturating_sub(b);
+                if a_started {
+                    for ((o, &a), &b) in d.iter_mut().zip(amax.iter()).zip(amin.iter()) {
+                        *o = (a as u16).wrapping_sub(b as u16);
+                    }
+                } else {
+                    d.fill(0);
                 }
             }
             x0 = x1;
