@@ -328,7 +328,15 @@ pub fn median_mad_u16(values: &[u16], hist: &mut [u32], dev: &mut [u32]) -> (u32
     // (counts cannot wrap: fewer than 2³² values reach one bin for any
     // frame a u16 run can describe)
     let last = bins - 1;
-    for &v in values {
+    // eight values per step (unrolled: no loop overhead per increment)
+    let mut it = values.chunks_exact(8);
+    for c8 in &mut it {
+        for &v in c8 {
+            let c = &mut hist[(v as usize).min(last)];
+            *c = c.wrapping_add(1);
+        }
+    }
+    for &v in it.remainder() {
         let c = &mut hist[(v as usize).min(last)];
         *c = c.wrapping_add(1);
     }
