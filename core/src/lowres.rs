@@ -17,7 +17,8 @@
 //!
 //! Integer arithmetic only; no allocation (stack chunks of a few KiB); the
 //! caller provides every buffer. Both full-frame loops are slice-wise and
-//! vectorise: the downsample is about one instruction per source pixel, the
+//! vectorise: the downsample is about half an instruction per source pixel
+//! (default 4 × 4 blocks, read as 32-bit words), the
 //! gradient (decomposed by row half-width, see [`gradient_disk_u16`]) a
 //! few per low-resolution pixel (README "Performance").
 
