@@ -50,12 +50,6 @@ pub const fn grid_size(width: usize, height: usize) -> (usize, usize) {
     crate::lowres::low_size(width, height, BLOCK)
 }
 
-/// `round(Σ / n)` rounding half up (`n > 0`).
-#[inline]
-fn round_div(s: u32, n: u32) -> u16 {
-    ((2 * s + n) / (2 * n).max(1)).min(u16::MAX as u32) as u16
-}
-
 /// `d[i] = max(d[i], s[i])` (or the minimum) over the common length.
 fn merge(d: &mut [u16], s: &[u16], max: bool) {
     if max {
@@ -118,39 +112,81 @@ pub fn open_smooth(
     extremum_rows(out, tmp, bw, r, true);
     extremum_cols(tmp, grid, bw, bh, r, true);
     // 3 × 3 mean: horizontal sums into `tmp` (≤ 3 · 4080 fits a u16),
-    // then vertical sums divided by the number of cells inside
+    // then vertical sums (≤ 9 · 4080 = 36 720, a u16) into `grid`, both
+    // slice-wise, then per cell the rounded division by the number of
+    // cells inside
     for (srow, trow) in grid.chunks_exact(bw).zip(tmp.chunks_exact_mut(bw)) {
-        for (x, t) in trow.iter_mut().enumerate() {
-            let win = srow
-                .get(x.saturating_sub(1)..(x + 2).min(bw))
-                .unwrap_or(&[]);
-            *t = win
-                .iter()
-                .map(|&v| v as u32)
-                .sum::<u32>()
-                .min(u16::MAX as u32) as u16;
+        trow.copy_from_slice(srow);
+        if bw > 1 {
+            add_u16(&mut trow[..bw - 1], &srow[1..]);
+            add_u16(&mut trow[1..], &srow[..bw - 1]);
         }
     }
-    for (y, orow) in out.chunks_exact_mut(bw).enumerate().take(bh) {
+    for (y, (grow, orow)) in grid
+        .chunks_exact_mut(bw)
+        .zip(out.chunks_exact_mut(bw))
+        .enumerate()
+        .take(bh)
+    {
         let (lo, hi) = (y.saturating_sub(1), (y + 1).min(bh - 1));
         let rows = (hi - lo + 1) as u32;
-        for (x, o) in orow.iter_mut().enumerate() {
-            let cols = ((x + 1).min(bw - 1) - x.saturating_sub(1) + 1) as u32;
-            let mut s = 0u32;
-            for yy in lo..=hi {
-                s += tmp.get(yy * bw + x).copied().unwrap_or(0) as u32;
-            }
-            *o = round_div(s, rows * cols);
+        grow.copy_from_slice(tmp.get(lo * bw..(lo + 1) * bw).unwrap_or(&[]));
+        for yy in lo + 1..=hi {
+            add_u16(grow, tmp.get(yy * bw..(yy + 1) * bw).unwrap_or(&[]));
+        }
+        // interior cells have 3 columns, the end cells 2 (1 if bw = 1)
+        let inner = Div::new(rows * 3);
+        let edge = Div::new(rows * bw.min(2) as u32);
+        for (o, &s) in orow.iter_mut().zip(grow.iter()) {
+            *o = inner.round(s as u32);
+        }
+        if let (Some(o), Some(&s)) = (orow.first_mut(), grow.first()) {
+            *o = edge.round(s as u32);
+        }
+        if let (Some(o), Some(&s)) = (orow.last_mut(), grow.last()) {
+            *o = edge.round(s as u32);
         }
     }
     Ok(())
+}
+
+/// `d[i] += s[i]` over the common length (sums known to fit).
+fn add_u16(d: &mut [u16], s: &[u16]) {
+    d.iter_mut()
+        .zip(s)
+        .for_each(|(d, &v)| *d = d.wrapping_add(v));
+}
+
+/// `round(s / n)` rounding half up, `⌊(2s + n) / 2n⌋`, by a multiply and a
+/// shift: `⌊(2s + n) / 2n⌋ = ((2s + n) · ⌈2³⁶ / 2n⌉) >> 36`, exact for
+/// `2s + n < 2¹⁸` (here `s ≤ 36 720`, `n ≤ 9`).
+#[derive(Clone, Copy)]
+struct Div {
+    n: u64,
+    m: u64,
+}
+
+impl Div {
+    fn new(n: u32) -> Div {
+        let n = n.max(1) as u64;
+        Div {
+            n,
+            m: (1u64 << 36).div_ceil(2 * n),
+        }
+    }
+
+    #[inline]
+    fn round(&self, s: u32) -> u16 {
+        (((2 * s as u64 + self.n) * self.m) >> 36).min(u16::MAX as u64) as u16
+    }
 }
 
 /// Step 1 from the 4 × 4 block sums of the coarse pass
 /// ([`crate::lowres::box_mean16`] with factor 4 stores `Σ` of each block
 /// exactly): `L = round(Σ_{4×4 blocks} / 16)`. `low` is `lw` cells wide;
 /// valid when the frame's sides are multiples of [`BLOCK`] (then
-/// `lw = 4 bw`), which the caller checks.
+/// `lw = 4 bw`), which the caller checks, and for block sums of 8-bit
+/// pixels (`≤ 16 · 255`; four rows of them are added in `u16`).
 pub fn grid_from_low4(
     low: &[u16],
     lw: usize,
@@ -162,16 +198,31 @@ pub fn grid_from_low4(
     if low.len() < lw * bh * 4 || lw < bw * 4 {
         return Err(BgError::BufferTooSmall);
     }
+    // per grid row: the four low rows summed slice-wise (≤ 4 · 4080 fits a
+    // u16) in chunks of `CH` low columns, then four column sums per cell
+    // (≤ 65 280, so `+ 8` still fits)
+    const CH: usize = 256;
+    let mut acc = [0u16; CH];
     for (gy, grow) in grid.chunks_exact_mut(bw.max(1)).enumerate() {
-        for (gx, g) in grow.iter_mut().enumerate() {
-            let mut s = 0u32;
-            for ly in 4 * gy..4 * gy + 4 {
-                let row = low
-                    .get(ly * lw + 4 * gx..ly * lw + 4 * gx + 4)
-                    .unwrap_or(&[]);
-                s += row.iter().map(|&v| v as u32).sum::<u32>();
+        let rows = low.get(4 * gy * lw..(4 * gy + 4) * lw).unwrap_or(&[]);
+        let row = |k: usize| rows.get(k * lw..k * lw + 4 * bw).unwrap_or(&[]);
+        let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+        for (c, gch) in grow.chunks_mut(CH / 4).enumerate() {
+            let (a, b) = (c * CH, (c * CH + 4 * gch.len()).min(4 * bw));
+            let acc = &mut acc[..b - a];
+            for ((((s, &p0), &p1), &p2), &p3) in acc
+                .iter_mut()
+                .zip(r0.get(a..b).unwrap_or(&[]))
+                .zip(r1.get(a..b).unwrap_or(&[]))
+                .zip(r2.get(a..b).unwrap_or(&[]))
+                .zip(r3.get(a..b).unwrap_or(&[]))
+            {
+                *s = p0.wrapping_add(p1).wrapping_add(p2.wrapping_add(p3));
             }
-            *g = ((s + 8) / 16).min(u16::MAX as u32) as u16;
+            for (g, q) in gch.iter_mut().zip(acc.chunks_exact(4)) {
+                let s = (q[0] as u32 + q[1] as u32) + (q[2] as u32 + q[3] as u32);
+                *g = ((s + 8) / 16).min(u16::MAX as u32) as u16;
+            }
         }
     }
     Ok(())
@@ -271,12 +322,21 @@ impl<'a> BgGrid<'a> {
             let w = (pos % span) as u32; // 32nds; steps by 2 per pixel
             let k = ((33 - w) / 2).max(1) as usize; // w, w + 2, …, ≤ 31
             let end = (i + k).min(len);
-            // a·(32 − w) + b·w, stepped by 2 (b − a) per pixel
-            let mut v = (a * (32 - w) + b * w) as i64;
-            let step = 2 * (b as i64 - a as i64);
-            for p in px.get_mut(i..end).unwrap_or(&mut []) {
-                put(p, v as u32);
-                v += step;
+            // a·(32 − w) + b·w, stepped by 2 (b − a) per pixel (< 2³¹: a
+            // and b are at most 32 · 65 535); pixel j of the interval as
+            // v + j · step, a closed form the compiler vectorises
+            let v = (a * (32 - w) + b * w) as i32;
+            let step = 2 * (b as i32 - a as i32);
+            // the interval's (≤ 16) background levels minus OFFSET, all 16
+            // computed (a fixed trip count: vectorised), then subtracted
+            let mut bg = [0i16; 16];
+            for (j, g) in bg.iter_mut().enumerate() {
+                let t = v + j as i32 * step + 512;
+                *g = ((((t >> 10) + 8) >> 4) - OFFSET) as i16;
+            }
+            let part = px.get_mut(i..end).unwrap_or(&mut []);
+            for (p, &g) in part.iter_mut().zip(bg.iter()) {
+                *p = (*p as i16 - g).clamp(0, 255) as u8;
             }
             pos += 2 * (end - i) as i64;
             i = end;
@@ -344,6 +404,25 @@ mod tests {
             let (mut gg, mut tmp, mut out) = (g.clone(), vec![0u16; bw * bh], vec![0u16; bw * bh]);
             open_smooth(&mut gg, bw, bh, r, &mut tmp, &mut out).unwrap();
             prop_assert_eq!(out, want);
+        }
+
+        /// The chunked block sums equal the direct 16 × 16 block mean
+        /// (grids wider than one chunk of 64 cells included).
+        #[test]
+        fn grid_from_low4_equals_box_mean16(bw in 1usize..80, bh in 1usize..4, seed in any::<u64>()) {
+            let (w, h) = (16 * bw, 16 * bh);
+            let mut s = seed | 1;
+            let px: Vec<u8> = (0..w * h).map(|_| {
+                s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 24) as u8
+            }).collect();
+            let img = crate::image::ImageView::packed(&px, w, h).unwrap();
+            let mut low = vec![0u16; w * h / 16];
+            crate::lowres::box_mean16(img, 4, &mut low).unwrap();
+            let mut direct = vec![0u16; bw * bh];
+            crate::lowres::box_mean16(img, 16, &mut direct).unwrap();
+            let mut grid = vec![0u16; bw * bh];
+            grid_from_low4(&low, w / 4, bw, bh, &mut grid).unwrap();
+            prop_assert_eq!(grid, direct);
         }
 
         #[test]

@@ -327,7 +327,7 @@ pub fn label_components(
 /// or zero (`nonzero` false); `w` when there is none. Uniform stretches are
 /// skipped 16 pixels per step.
 #[inline]
-fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
+pub(crate) fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
     let w = w.min(row.len());
     const ONES: u128 = u128::MAX / 255; // 0x0101…01
     while x + 16 <= w {

@@ -698,44 +698,75 @@ fn line_stage<const MAX: bool>(
 ) {
     let k = 2 * half + 1;
     let w = pw - 2 * half;
-    // input i (offset kk = i − half): row y + kk, column x ± kk
-    // slot of row y − half (rows y − half ..= y + half are consecutive slots)
-    let base = (y + k - half % k) % k;
-    let input = |i: usize| -> &[u8] {
-        let inside = (y + i).checked_sub(half).is_some_and(|yy| yy < h);
-        let sl = if base + i >= k {
-            base + i - k
-        } else {
-            base + i
-        };
-        let row = if inside {
-            ring.get(sl * pw..(sl + 1) * pw).unwrap_or(&[])
-        } else {
-            identity
-        };
-        let start = match dir {
-            Diagonal::Main => i,
-            Diagonal::Anti => 2 * half - i,
-        };
-        row.get(start..start + w).unwrap_or(&[])
-    };
     let dst = match dst.get_mut(..w) {
         Some(d) => d,
         None => return,
     };
     // the usual lengths straight into the kernel of their input count
     match k {
-        3 => reduce_k::<MAX, 3>(dst, &core::array::from_fn(input)),
-        5 => reduce_k::<MAX, 5>(dst, &core::array::from_fn(input)),
-        7 => reduce_k::<MAX, 7>(dst, &core::array::from_fn(input)),
+        3 => line_inputs::<MAX, 3>(ring, identity, y, h, pw, dir, dst),
+        5 => line_inputs::<MAX, 5>(ring, identity, y, h, pw, dir, dst),
+        7 => line_inputs::<MAX, 7>(ring, identity, y, h, pw, dir, dst),
         _ => {
+            let base = (y + k - half % k) % k;
             let mut srcs: [&[u8]; 2 * (MAX_SE / 2) + 1] = [&[]; 2 * (MAX_SE / 2) + 1];
             for (i, s) in srcs.iter_mut().take(k).enumerate() {
-                *s = input(i);
+                let inside = (y + i).checked_sub(half).is_some_and(|yy| yy < h);
+                let sl = if base + i >= k {
+                    base + i - k
+                } else {
+                    base + i
+                };
+                let row = if inside {
+                    ring.get(sl * pw..(sl + 1) * pw).unwrap_or(&[])
+                } else {
+                    identity
+                };
+                let start = match dir {
+                    Diagonal::Main => i,
+                    Diagonal::Anti => 2 * half - i,
+                };
+                *s = row.get(start..start + w).unwrap_or(&[]);
             }
             reduce::<MAX>(dst, &srcs[..k]);
         }
     }
+}
+
+/// [`line_stage`] for lines of `K` pixels: the `K` input slices found
+/// with one comparison and one slice check each, then [`reduce_k`].
+fn line_inputs<const MAX: bool, const K: usize>(
+    ring: &[u8],
+    identity: &[u8],
+    y: usize,
+    h: usize,
+    pw: usize,
+    dir: Diagonal,
+    dst: &mut [u8],
+) {
+    let half = K / 2;
+    let w = dst.len();
+    // slot of row y − half; input i is row y − half + i, slot + i (mod K)
+    let base = (y + K - half) % K;
+    let srcs: [&[u8]; K] = core::array::from_fn(|i| {
+        let sl = if base + i >= K {
+            base + i - K
+        } else {
+            base + i
+        };
+        let start = match dir {
+            Diagonal::Main => i,
+            Diagonal::Anti => 2 * half - i,
+        };
+        // row y − half + i inside 0..h (wrapping: rows above 0 are huge)
+        if (y + i).wrapping_sub(half) < h {
+            ring.get(sl * pw + start..sl * pw + start + w)
+                .unwrap_or(&[])
+        } else {
+            identity.get(start..start + w).unwrap_or(&[])
+        }
+    });
+    reduce_k::<MAX, K>(dst, &srcs);
 }
 
 /// Grey morphological gradient `dilate − erode` by `disk` (Section III.A,

@@ -17,16 +17,31 @@ use crate::image::ImageView;
 /// Robust white-noise σ of `img` in sixteenths of a grey level (see the
 /// module documentation); 0 for frames smaller than 2 × 2.
 pub fn noise_sigma16(img: ImageView<'_>) -> u32 {
-    let mut hist = [0u32; 512];
-    let mut total = 0u64;
-    noise_hist(img, &mut hist, &mut total);
+    let mut h8 = [0u32; 256];
+    let total = noise_hist8(img, &mut h8);
     if total == 0 {
         return 0;
     }
+    // `h8` is exact below bin 255 (which holds every |d| ≥ 255), so a
+    // median below 255 is the full histogram's; otherwise (|d| of half
+    // the blocks ≥ 255: not a camera frame) the exact 512-bin histogram
+    if let Some(s) = sigma16_of(&h8[..255], total) {
+        return s;
+    }
+    let mut hist = [0u32; 512];
+    let mut t = 0u64;
+    noise_hist(img, &mut hist, &mut t);
+    sigma16_of(&hist, t).unwrap_or(0)
+}
+
+/// `σ` (sixteenths) from the histogram `hist` of |d| (bins 0, 1, …; the
+/// blocks beyond its last bin only counted in `total`): `None` when the
+/// median is beyond the last bin.
+fn sigma16_of(hist: &[u32], total: u64) -> Option<u32> {
     // interpolated median of |d|: bin k covers [k − ½, k + ½) (bin 0: [0, ½))
     let half = total as f32 / 2.0;
     let mut acc = 0u64;
-    let mut med = 0.0f32;
+    let mut med = None;
     for (k, &c) in hist.iter().enumerate() {
         if c == 0 {
             continue;
@@ -37,58 +52,94 @@ pub fn noise_sigma16(img: ImageView<'_>) -> u32 {
             } else {
                 (k as f32 - 0.5, 1.0)
             };
-            med = lo + width * (half - acc as f32) / c as f32;
+            med = Some(lo + width * (half - acc as f32) / c as f32);
             break;
         }
         acc += c as u64;
     }
     // σ = 1.4826 · med / 2, in 1/16 grey levels
-    let s = 16.0 * 1.4826 * med / 2.0;
-    if s.is_finite() && s > 0.0 {
+    let s = 16.0 * 1.4826 * med? / 2.0;
+    Some(if s.is_finite() && s > 0.0 {
         (s + 0.5) as u32
     } else {
         0
-    }
+    })
 }
 
-/// Adds the histogram of `|d|` over the frame's disjoint 2 × 2 blocks to
-/// `hist` and their number to `total`.
-fn noise_hist(img: ImageView<'_>, hist: &mut [u32; 512], total: &mut u64) {
+/// Adds the histogram of `min(|d|, 255)` over the frame's disjoint 2 × 2
+/// blocks to `hist`; returns the number of blocks.
+///
+/// Per chunk of blocks, one slice-wise (vectorised) pass computes
+/// `|d| = |(a + e) − (b + c)|` from the two rows' byte pairs, saturated to
+/// a byte, then a plain loop counts the bytes eight at a time.
+fn noise_hist8(img: ImageView<'_>, hist: &mut [u32; 256]) -> u64 {
     let (w, h) = (img.width(), img.height());
-    // |d| of up to BLOCKS blocks at a time, in two slice-wise (vectorised)
-    // steps, then counted; |d| ≤ 510 < 512, so the mask keeps every index
-    // exact. Step 1: e = upper row − lower row per pixel (i16); step 2: the
-    // two e of a block are one 32-bit word, d = low half − high half (on a
-    // big-endian target the halves swap, which only negates d).
     const BLOCKS: usize = 512;
-    let mut ew = [0u32; BLOCKS];
-    let mut ad = [0u16; BLOCKS];
+    let mut ad = [0u8; BLOCKS];
+    let nb = w / 2;
+    let mut total = 0u64;
     for by in 0..h / 2 {
         let (ra, rb) = (img.row(2 * by), img.row(2 * by + 1));
-        let nb = w / 2;
         let mut b0 = 0usize;
         while b0 < nb {
             let b1 = (b0 + BLOCKS).min(nb);
             let (Some(pa), Some(pb)) = (ra.get(2 * b0..2 * b1), rb.get(2 * b0..2 * b1)) else {
                 break;
             };
-            let ew = &mut ew[..b1 - b0];
-            let e: &mut [i16] = bytemuck::cast_slice_mut(ew);
-            for ((o, &a), &b) in e.iter_mut().zip(pa).zip(pb) {
-                *o = a as i16 - b as i16;
-            }
             let ad = &mut ad[..b1 - b0];
-            for (o, &wd) in ad.iter_mut().zip(ew.iter()) {
-                let lo = wd as u16 as i16;
-                let hi = (wd >> 16) as u16 as i16;
-                *o = (lo - hi).unsigned_abs();
+            match (
+                bytemuck::try_cast_slice::<u8, u16>(pa),
+                bytemuck::try_cast_slice::<u8, u16>(pb),
+            ) {
+                (Ok(wa), Ok(wb)) => {
+                    // a block's two pixels of a row are one 16-bit word:
+                    // low and high byte (swapped on a big-endian target,
+                    // which only negates d)
+                    for ((o, &x), &y) in ad.iter_mut().zip(wa).zip(wb) {
+                        let s1 = ((x & 0xFF) + (y >> 8)) as i16;
+                        let s2 = ((x >> 8) + (y & 0xFF)) as i16;
+                        let d = s1 - s2;
+                        *o = d.max(-d).min(255) as u8;
+                    }
+                }
+                _ => {
+                    for ((o, a), b) in ad
+                        .iter_mut()
+                        .zip(pa.chunks_exact(2))
+                        .zip(pb.chunks_exact(2))
+                    {
+                        let d = (a[0] as i16 + b[1] as i16) - (a[1] as i16 + b[0] as i16);
+                        *o = d.unsigned_abs().min(255) as u8;
+                    }
+                }
             }
-            for &k in ad.iter() {
-                let c = &mut hist[(k as usize) & 511];
-                *c = c.wrapping_add(1);
+            let mut it = ad.chunks_exact(8);
+            for c in &mut it {
+                for &k in c {
+                    hist[k as usize] += 1;
+                }
             }
-            *total += (b1 - b0) as u64;
+            for &k in it.remainder() {
+                hist[k as usize] += 1;
+            }
+            total += (b1 - b0) as u64;
             b0 = b1;
+        }
+    }
+    total
+}
+
+/// Adds the histogram of `|d|` over the frame's disjoint 2 × 2 blocks to
+/// `hist` and their number to `total` (exact up to 510; the fallback of
+/// [`noise_sigma16`]).
+fn noise_hist(img: ImageView<'_>, hist: &mut [u32; 512], total: &mut u64) {
+    let (w, h) = (img.width(), img.height());
+    for by in 0..h / 2 {
+        let (ra, rb) = (img.row(2 * by), img.row(2 * by + 1));
+        for (a, b) in ra.chunks_exact(2).zip(rb.chunks_exact(2)).take(w / 2) {
+            let d = (a[0] as i32 + b[1] as i32) - (a[1] as i32 + b[0] as i32);
+            hist[(d.unsigned_abs() as usize).min(511)] += 1;
+            *total += 1;
         }
     }
 }
@@ -130,6 +181,29 @@ mod tests {
             noise_hist(v, &mut h2, &mut t2);
             prop_assert_eq!(&h2[..], &hist[..]);
             prop_assert_eq!(t2, total);
+            // the byte histogram: the same below 255, the rest in bin 255
+            let mut h8 = [0u32; 256];
+            prop_assert_eq!(noise_hist8(v, &mut h8), total);
+            prop_assert_eq!(&h8[..255], &hist[..255]);
+            prop_assert_eq!(h8[255], hist[255..].iter().sum::<u32>());
+        }
+
+        /// The estimate equals the one from the exact 512-bin histogram,
+        /// on frames of any noise (up to a checkerboard of 0 and 255,
+        /// whose |d| = 510 takes the fallback).
+        #[test]
+        fn estimate_equals_the_full_histograms(w in 2usize..300, h in 2usize..8,
+                                               amp in 0u32..=255, seed in any::<u64>()) {
+            let mut s = seed | 1;
+            let img: Vec<u8> = (0..w * h).map(|i| {
+                s ^= s << 13; s ^= s >> 7; s ^= s << 17;
+                let v = (s >> 40) as u32 % (amp + 1);
+                let check = ((i % w) + (i / w)) % 2 == 0;
+                (if check { 127 + v / 2 } else { 128 - v / 2 }).min(255) as u8
+            }).collect();
+            let v = ImageView::packed(&img, w, h).unwrap();
+            let (hist, total) = naive_hist_total(&img, w, h);
+            prop_assert_eq!(noise_sigma16(v), sigma16_of(&hist, total).unwrap_or(0));
         }
 
         #[test]

@@ -55,7 +55,7 @@ use super::{Region, SegmentError, SegmentStats};
 use crate::background::BgGrid;
 use crate::hist::add_row_256;
 use crate::image::ImageView;
-use crate::label::{label_components, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use crate::label::{label_components, next_where, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
 use crate::lowres::{box_mean16, gradient_disk_u16, low_size, median_mad_u16};
 use crate::morph::{gradient_disk, remove_mesh, Disk};
 use crate::params::Params;
@@ -321,29 +321,54 @@ fn coarse_regions_low(
     }
     // keep the low components that hold a seed (g > t_high)
     let min_low = ((params.area_min / 4).max(1) as usize).div_ceil(f * f) as u32;
-    let n_lab = label_components(
+    label_components(
         ImageView::packed(mask, lw, lh).map_err(|_| SegmentError::WorkspaceTooSmall)?,
         lb.labels,
         |a| a >= min_low,
     )
-    .map_err(err)? as usize;
+    .map_err(err)?;
     let seeded = lb
         .seeded
         .get_mut(..nl)
         .ok_or(SegmentError::WorkspaceTooSmall)?;
     seeded.fill(0);
     let labels = lb.labels.get(..nl).ok_or(SegmentError::WorkspaceTooSmall)?;
-    for (&l, &g) in labels.iter().zip(grad) {
-        if l > 0 && g > t_high {
-            if let Some(s) = seeded.get_mut(l as usize - 1) {
-                *s = 1;
+    // both loops only look at the mask's runs (a seed has g > t_high >
+    // t_low), background skipped 16 pixels at a time
+    let lw1 = lw.max(1);
+    for (mrow, (lrow, grow)) in mask
+        .chunks_exact(lw1)
+        .zip(labels.chunks_exact(lw1).zip(grad.chunks_exact(lw1)))
+    {
+        let mut x = 0;
+        while x < lw1 {
+            let x0 = next_where(mrow, x, lw1, true);
+            x = next_where(mrow, x0, lw1, false);
+            let (Some(lr), Some(gr)) = (lrow.get(x0..x), grow.get(x0..x)) else {
+                break;
+            };
+            for (&l, &g) in lr.iter().zip(gr) {
+                if l > 0 && g > t_high {
+                    if let Some(s) = seeded.get_mut(l as usize - 1) {
+                        *s = 1;
+                    }
+                }
             }
         }
     }
-    let _ = n_lab;
-    for (m, &l) in mask.iter_mut().zip(labels) {
-        let keep = l > 0 && seeded.get(l as usize - 1).is_some_and(|&s| s != 0);
-        *m = if keep { 255 } else { 0 };
+    for (mrow, lrow) in mask.chunks_exact_mut(lw1).zip(labels.chunks_exact(lw1)) {
+        let mut x = 0;
+        while x < lw1 {
+            let x0 = next_where(mrow, x, lw1, true);
+            x = next_where(mrow, x0, lw1, false);
+            let (Some(mr), Some(lr)) = (mrow.get_mut(x0..x), lrow.get(x0..x)) else {
+                break;
+            };
+            for (m, &l) in mr.iter_mut().zip(lr) {
+                let keep = l > 0 && seeded.get(l as usize - 1).is_some_and(|&s| s != 0);
+                *m = if keep { 255 } else { 0 };
+            }
+        }
     }
     // 4. components → regions (streaming, for their moments)
     let mut labeler = StreamLabeler::new(lw, t.slots, t.free, t.prev, t.cur)

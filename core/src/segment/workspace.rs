@@ -148,7 +148,12 @@ impl<'a> Ws<'a> {
         let n = width.checked_mul(height)?;
         let t = StreamLabeler::table_len(width);
         let r = StreamLabeler::runs_len(width);
-        let (filtered, ws) = carve::<u8>(ws, n)?;
+        // the mesh-free frame word-aligned (`lowres::box_mean16` reads its
+        // rows as 32-bit words; the few bytes fit the part's SLACK)
+        let (filtered, ws) = carve::<u32>(ws, n.div_ceil(4))?;
+        let filtered = bytemuck::cast_slice_mut::<u32, u8>(filtered)
+            .get_mut(..n)
+            .unwrap_or(&mut []);
         let (grad, ws) = carve::<u8>(ws, max(n, lowres_size(width, height)))?;
         let (disk, ws) = carve::<u8>(ws, disk_scratch_len(width, MAX_SE / 2))?;
         let (slots, ws) = carve::<[u64; SLOT_WORDS]>(ws, t)?;
