@@ -55,7 +55,7 @@ use super::{Region, SegmentError, SegmentStats};
 use crate::background::BgGrid;
 use crate::hist::add_row_256;
 use crate::image::ImageView;
-use crate::label::{label_components, next_where, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use crate::label::{label_components, next_run, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
 use crate::lowres::{box_mean16, gradient_disk_u16, low_size, median_mad_u16};
 use crate::morph::{gradient_disk, remove_mesh, Disk};
 use crate::params::Params;
@@ -341,10 +341,9 @@ fn coarse_regions_low(
         .zip(labels.chunks_exact(lw1).zip(grad.chunks_exact(lw1)))
     {
         let mut x = 0;
-        while x < lw1 {
-            let x0 = next_where(mrow, x, lw1, true);
-            x = next_where(mrow, x0, lw1, false);
-            let (Some(lr), Some(gr)) = (lrow.get(x0..x), grow.get(x0..x)) else {
+        while let Some(run) = next_run(mrow, x, lw1) {
+            x = run.end;
+            let (Some(lr), Some(gr)) = (lrow.get(run.clone()), grow.get(run)) else {
                 break;
             };
             for (&l, &g) in lr.iter().zip(gr) {
@@ -358,10 +357,9 @@ fn coarse_regions_low(
     }
     for (mrow, lrow) in mask.chunks_exact_mut(lw1).zip(labels.chunks_exact(lw1)) {
         let mut x = 0;
-        while x < lw1 {
-            let x0 = next_where(mrow, x, lw1, true);
-            x = next_where(mrow, x0, lw1, false);
-            let (Some(mr), Some(lr)) = (mrow.get_mut(x0..x), lrow.get(x0..x)) else {
+        while let Some(run) = next_run(mrow, x, lw1) {
+            x = run.end;
+            let (Some(lr), Some(mr)) = (lrow.get(run.clone()), mrow.get_mut(run)) else {
                 break;
             };
             for (m, &l) in mr.iter_mut().zip(lr) {
