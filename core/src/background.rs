@@ -90,7 +90,9 @@ fn extremum_cols(src: &[u16], dst: &mut [u16], bw: usize, bh: usize, r: usize, m
 /// Steps 2–3 of the module documentation: the opening of `grid`
 /// (`bw × bh` cells, sixteenths of a grey level) by the `(2r + 1)²`
 /// square, then its 3 × 3 mean, into `out`; `grid` is overwritten
-/// (scratch), `tmp` is scratch of `bw · bh` cells.
+/// (scratch), `tmp` is scratch of `bw · bh` cells. Cells must be at most
+/// 7281 (`u16::MAX / 9`: the 3 × 3 sums are `u16`); cell means of 8-bit
+/// frames are at most 16 · 255 = 4080.
 pub fn open_smooth(
     grid: &mut [u16],
     bw: usize,

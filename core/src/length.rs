@@ -158,7 +158,8 @@ pub struct LengthConfig {
     /// contrast in either view, what continues past the end is something
     /// else (a neighbour, glow) and the snake does not run there.
     pub probe_max_body_fraction: f32,
-    /// Beyond the paper: an end extended by the tail snake takes the
+    /// Beyond the paper, off by default (measured worse, README "Stereo
+    /// pairing and 3-D length"): when true, an end extended by the tail snake takes the
     /// disparity of the unextended end continued along the chord through
     /// the two unextended ends' disparities (a straight fish's disparity is
     /// affine along its image axis), not the block line extrapolated.

@@ -116,11 +116,15 @@ fn noise_hist8(img: ImageView<'_>, hist: &mut [u32; 256]) -> u64 {
             let mut it = ad.chunks_exact(8);
             for c in &mut it {
                 for &k in c {
-                    hist[k as usize] += 1;
+                    if let Some(h) = hist.get_mut(k as usize) {
+                        *h = h.wrapping_add(1);
+                    }
                 }
             }
             for &k in it.remainder() {
-                hist[k as usize] += 1;
+                if let Some(h) = hist.get_mut(k as usize) {
+                    *h = h.wrapping_add(1);
+                }
             }
             total += (b1 - b0) as u64;
             b0 = b1;

@@ -101,7 +101,9 @@ pub struct PipelineConfig {
     pub inside_margin: u32,
     /// Left and right rectangles of the rectified frames where every pixel
     /// has a raw source (OpenCV's `validPixROI1/2`; the whole frame by
-    /// default, as at `alpha = 0`): the wholly-inside test of a length
+    /// default, as at `alpha = 0`; the host sets them from
+    /// `Rectifier::valid_rois`, its default alpha being 0.25): the
+    /// wholly-inside test of a length
     /// keeps `inside_margin` from their edges ([`wholly_inside_valid`]).
     pub valid: [Roi; 2],
 }

@@ -53,6 +53,10 @@ impl PipelineFrames {
     }
 }
 
+/// Every non-duplicate closed track is a fish. (`fishtrack track`, which
+/// knows the raw view, also drops a track whose boxes all lie in the fill
+/// of an `alpha > 0` rectification; the device cannot tell, so on a haul
+/// with such a track the two counts differ by it.)
 fn fish_of(e: &PipelineEvent, out: &mut Vec<FishClosed>) {
     if let PipelineEvent::TrackClosed {
         track,

@@ -48,7 +48,10 @@ fn main() -> Result<()> {
             "--smooth" => smooth = Some(args.next().context("--smooth K")?.parse()?),
             "--elong" => elong = Some(args.next().context("--elong X")?.parse()?),
             "--bins" => bins = Some(args.next().context("--bins N")?.parse::<u8>()?),
-            "--alpha" => alpha = args.next().context("--alpha A")?.parse()?,
+            "--alpha" => {
+                alpha =
+                    fishtrack::track_cmd::check_alpha(args.next().context("--alpha A")?.parse()?)?
+            }
             "--out" => out = PathBuf::from(args.next().context("--out DIR")?),
             s if s.starts_with("--") => bail!("unknown option {s}"),
             _ => hauls.push(PathBuf::from(a)),

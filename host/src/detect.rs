@@ -23,7 +23,7 @@ use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI
 use crate::calib::StereoCalib;
 use crate::haul::Haul;
 use crate::output::{write_detections, DetectionRow};
-use crate::rectify::{FixedMap, RectifiedCamera, Rectifier};
+use crate::rectify::{in_raw_view, FixedMap, RectifiedCamera, Rectifier};
 
 /// Object capacity per frame (issue 4's recommended `Objects<64, 16384>`).
 pub const MAX_OBJECTS: usize = 64;
@@ -63,33 +63,16 @@ pub fn detection_rows<const N: usize, const R: usize>(
 ) -> Vec<DetectionRow> {
     let mut rows = Vec::with_capacity(objs.items.len());
     for o in objs.items.iter() {
-        let b = o.bbox;
-        // pixel-edge box: pixel x covers [x − 0.5, x + 0.5]
-        let (x0, y0, x1, y1) = cam.rect_box_to_raw_clipped(
-            b.x as f64 - 0.5,
-            b.y as f64 - 0.5,
-            b.right() as f64 - 0.5,
-            b.bottom() as f64 - 0.5,
-        );
-        if x1 <= x0 || y1 <= y0 {
+        let bbox = cam.raw_box(&o.bbox);
+        if !in_raw_view(&bbox) {
             // wholly in the fill of an alpha > 0 rectification
             continue;
         }
-        let ob = &o.obb;
-        let (c, s) = ((ob.angle as f64).cos(), (ob.angle as f64).sin());
-        let hw = ob.half_w as f64;
-        let (cx, cy) = (ob.cx as f64, ob.cy as f64);
-        let p = cam.rect_to_raw(cx + hw * c, cy + hw * s);
-        let q = cam.rect_to_raw(cx - hw * c, cy - hw * s);
-        let len = ((p.0 - q.0).powi(2) + (p.1 - q.1).powi(2)).sqrt();
         rows.push(DetectionRow {
             frame,
-            // index coordinates (pixel centre at an integer) → the raw
-            // frame's pixel-edge convention (centres at integer + 0.5), as
-            // `truth.json` and `track_cmd::raw_box` use
-            bbox: [x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0],
+            bbox,
             conf: 1.0,
-            length_px: len.is_finite().then_some(len),
+            length_px: cam.raw_axis_length(&o.obb),
         });
     }
     rows

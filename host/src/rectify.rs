@@ -459,6 +459,13 @@ pub struct RectifiedCamera {
     pub height: u32,
 }
 
+/// Whether a raw box from [`RectifiedCamera::raw_box`] holds any of the raw
+/// view (a box wholly in the fill of an `alpha > 0` rectification clips to
+/// zero width or height).
+pub fn in_raw_view(b: &[f64; 4]) -> bool {
+    b[2] > 0.0 && b[3] > 0.0
+}
+
 /// Float undistort-rectify maps (`cv2.initUndistortRectifyMap`, `CV_32FC1`):
 /// rectified pixel `(x, y)` samples the raw image at
 /// `(map_x[y·w + x], map_y[y·w + x])`.
@@ -516,6 +523,31 @@ impl RectifiedCamera {
             self.m[(0, 0)] * xd + self.m[(0, 2)],
             self.m[(1, 1)] * yd + self.m[(1, 2)],
         )
+    }
+
+    /// A rectified upright box (pixel indices) → `[x, y, w, h]` in this
+    /// camera's raw pixels, in the pixel-edge convention of `truth.json`
+    /// (pixel centres at integer + 0.5), clipped to the raw frame. A box
+    /// wholly in the fill of an `alpha > 0` rectification clips to zero
+    /// width or height ([`in_raw_view`]).
+    pub fn raw_box(&self, b: &fishtrack_core::Roi) -> [f64; 4] {
+        // pixel indices x..x+w−1: outline x−½ .. x+w−½
+        let (x0, y0) = (b.x as f64 - 0.5, b.y as f64 - 0.5);
+        let (x1, y1) = (x0 + b.w as f64, y0 + b.h as f64);
+        let (a, c, d, e) = self.rect_box_to_raw_clipped(x0, y0, x1, y1);
+        [a + 0.5, c + 0.5, (d - a).max(0.0), (e - c).max(0.0)]
+    }
+
+    /// Raw-pixel length of an oriented box's long axis (the segmentation's
+    /// 2-D fish length), `None` when it is not a positive finite length.
+    pub fn raw_axis_length(&self, ob: &fishtrack_core::object::OrientedBox) -> Option<f64> {
+        let (c, s) = ((ob.angle as f64).cos(), (ob.angle as f64).sin());
+        let hw = ob.half_w as f64;
+        let (cx, cy) = (ob.cx as f64, ob.cy as f64);
+        let p = self.rect_to_raw(cx - hw * c, cy - hw * s);
+        let q = self.rect_to_raw(cx + hw * c, cy + hw * s);
+        let len = ((p.0 - q.0).powi(2) + (p.1 - q.1).powi(2)).sqrt();
+        (len.is_finite() && len > 0.0).then_some(len)
     }
 
     /// Raw pixel → rectified pixel, the distortion inverted to 1e-14

@@ -43,7 +43,7 @@ use crate::output::{
     write_detections, write_fish, write_json, write_stereo, write_tracks, write_viame,
     DetectionRow, FishOut, StereoRow, TrackRow,
 };
-use crate::rectify::{RectifiedCamera, Rectifier};
+use crate::rectify::{in_raw_view, RectifiedCamera, Rectifier};
 
 /// Frames per second of Cam-trawl video (VIAME metadata).
 pub const FPS: f64 = 5.0;
@@ -209,21 +209,10 @@ pub fn views<'a>(l: &'a GrayImage, r: &'a GrayImage) -> Result<(ImageView<'a>, I
     Ok((lv, rv))
 }
 
-/// Whether a raw box (from [`raw_box`], clipped to the raw frame) holds
-/// any of the raw view: a box wholly in the fill of an `alpha > 0`
-/// rectification clips to zero width or height.
-pub fn in_raw_view(b: &[f64; 4]) -> bool {
-    b[2] > 0.0 && b[3] > 0.0
-}
-
 /// A rectified upright box → `[x, y, w, h]` in the camera's raw pixels
-/// (clipped to the raw frame).
+/// ([`RectifiedCamera::raw_box`]).
 pub fn raw_box(cam: &RectifiedCamera, b: &Roi) -> [f64; 4] {
-    // pixel indices x..x+w−1: outline x−½ .. x+w−½
-    let (x0, y0) = (b.x as f64 - 0.5, b.y as f64 - 0.5);
-    let (x1, y1) = (x0 + b.w as f64, y0 + b.h as f64);
-    let (a, c, d, e) = cam.rect_box_to_raw_clipped(x0, y0, x1, y1);
-    [a + 0.5, c + 0.5, (d - a).max(0.0), (e - c).max(0.0)]
+    cam.raw_box(b)
 }
 
 /// A rectified-frame 3-D point → raw left camera frame.
@@ -403,17 +392,11 @@ fn write_outputs(
                     // wholly in the fill of an alpha > 0 rectification
                     continue;
                 }
-                let (c, s) = (obb.angle.cos() as f64, obb.angle.sin() as f64);
-                let hw = obb.half_w as f64;
-                let (cx, cy) = (obb.cx as f64, obb.cy as f64);
-                let a = rect.left.rect_to_raw(cx - hw * c, cy - hw * s);
-                let b = rect.left.rect_to_raw(cx + hw * c, cy + hw * s);
-                let len_px = ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
                 dets.push(DetectionRow {
                     frame,
                     bbox: lb,
                     conf: 1.0,
-                    length_px: (len_px > 0.0).then_some(len_px),
+                    length_px: rect.left.raw_axis_length(&obb),
                 });
                 if let (Some(d), Some(s)) = (diag.as_mut(), st) {
                     diag_row(d, frame, &lb, &raw_box(&rect.right, &s.right_box), &s);
@@ -472,8 +455,27 @@ fn write_outputs(
     // rows wholly in the fill (alpha > 0) are not in the raw view; a track
     // never in it is no fish
     tracks.retain(|r| in_raw_view(&r.bbox));
-    let seen: BTreeSet<_> = tracks.iter().map(|r| r.id).collect();
-    fish.retain(|f| seen.contains(&f.track_id) && !duplicates.contains(&f.track_id));
+    // a fish needs an observation in the raw view; its first/last observed
+    // frame and its frame count (observed or predicted) come from the rows
+    // still there (equal to the core's when no row was dropped)
+    let mut seen: BTreeMap<u32, (u32, u32)> = BTreeMap::new();
+    for r in tracks.iter().filter(|r| r.conf >= 1.0) {
+        let e = seen.entry(r.id).or_insert((r.frame, r.frame));
+        *e = (e.0.min(r.frame), e.1.max(r.frame));
+    }
+    let mut rows_of: BTreeMap<u32, u32> = BTreeMap::new();
+    for r in &tracks {
+        *rows_of.entry(r.id).or_insert(0) += 1;
+    }
+    fish.retain_mut(|f| match seen.get(&f.track_id) {
+        Some(&(first, last)) if !duplicates.contains(&f.track_id) => {
+            f.first_frame = first;
+            f.last_frame = last;
+            f.frames = rows_of.get(&f.track_id).copied().unwrap_or(0);
+            true
+        }
+        _ => false,
+    });
     tracks.retain(|r| !duplicates.contains(&r.id));
     tracks.sort_by_key(|r| (r.frame, r.id));
     fish.sort_by_key(|f| f.track_id);
