@@ -89,31 +89,6 @@ pub fn add_masked_pair_256(
     one(pr, lr, hr);
 }
 
-/// Backprojects `px` through `lut` into `out` (`out[i] = lut[px[i]]`, up
-/// to the shorter length), eq. (3). Blocks of 16 pixels all below the
-/// first level the table maps to non-zero (the water, typically) are
-/// written as zeros without the per-pixel lookups.
-#[inline]
-pub fn backproject_row(px: &[u8], lut: &[u8; 256], out: &mut [u8]) {
-    let first = lut.iter().position(|&v| v != 0).unwrap_or(256);
-    let n = px.len().min(out.len());
-    let (px, out) = (&px[..n], &mut out[..n]);
-    let mut pc = px.chunks_exact(16);
-    let mut oc = out.chunks_exact_mut(16);
-    for (p, o) in (&mut pc).zip(&mut oc) {
-        if (p.iter().fold(0u8, |m, &v| m.max(v)) as usize) < first {
-            o.fill(0);
-        } else {
-            for (o, &v) in o.iter_mut().zip(p) {
-                *o = lut[v as usize];
-            }
-        }
-    }
-    for (o, &v) in oc.into_remainder().iter_mut().zip(pc.remainder()) {
-        *o = lut[v as usize];
-    }
-}
-
 /// Sum and sum of squares of the grey levels of `px`.
 #[inline]
 pub fn sum_sumsq(px: &[u8]) -> (u64, u64) {
@@ -397,21 +372,6 @@ mod tests {
             let px: std::vec::Vec<u8> = (0..len).map(|_| { s ^= s << 13; s ^= s >> 7; s ^= s << 17; if s % 3 == 0 { 255 } else { s as u8 } }).collect();
             let want = (px.iter().map(|&p| p as u64).sum::<u64>(), px.iter().map(|&p| p as u64 * p as u64).sum::<u64>());
             proptest::prop_assert_eq!(sum_sumsq(&px), want);
-        }
-        /// The block-skipping backprojection equals the per-pixel lookup.
-        #[test]
-        fn backproject_row_equals_lookup(len in 0usize..200, seed in proptest::prelude::any::<u64>(), cut in 0usize..257, spread in 1u64..256) {
-            let mut s = seed | 1;
-            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
-            let mut lut = [0u8; 256];
-            for (v, l) in lut.iter_mut().enumerate() {
-                if v >= cut && next() % 2 == 0 { *l = 255; }
-            }
-            let px: std::vec::Vec<u8> = (0..len).map(|_| (next() % spread) as u8).collect();
-            let want: std::vec::Vec<u8> = px.iter().map(|&v| lut[v as usize]).collect();
-            let mut got = std::vec![7u8; len];
-            backproject_row(&px, &lut, &mut got);
-            proptest::prop_assert_eq!(got, want);
         }
     }
 }

@@ -43,8 +43,8 @@ use super::workspace::{RoiBufs, STAT_WORDS};
 use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
 use crate::background::{BgGrid, BLOCK};
 use crate::hist::{
-    add_masked_pair_256, add_row_256, backproject_row, bin_of, fold_bins_range, median_mad,
-    percentile_256, ratio_backprojection_lut_range, sum_sumsq,
+    add_masked_pair_256, add_row_256, bin_of, fold_bins_range, median_mad, percentile_256,
+    ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
@@ -377,7 +377,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
             let rb = &mut b[j * rw..(j + 1) * rw];
             rb.fill(0);
-            backproject_row(row, &lut, &mut rb[r]);
+            for (&p, vb) in row.iter().zip(&mut rb[r]) {
+                *vb = lut[p as usize];
+            }
         }
     } else {
         b.copy_from_slice(a);
