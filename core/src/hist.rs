@@ -54,6 +54,53 @@ pub fn add_row_256(hist: &mut [u32; 256], row: &[u8]) {
     }
 }
 
+/// Adds the pixels of `px` under the masks `m_low` and `m_high` (0 =
+/// outside, anything else inside) to `h_low` and `h_high`: the masked
+/// histograms of eq. (2). Blocks of 16 pixels outside both masks (the
+/// water around a fish) are skipped with one test. The three slices are
+/// read up to the shortest one's length.
+#[inline]
+pub fn add_masked_pair_256(
+    h_low: &mut [u32; 256],
+    h_high: &mut [u32; 256],
+    px: &[u8],
+    m_low: &[u8],
+    m_high: &[u8],
+) {
+    let n = px.len().min(m_low.len()).min(m_high.len());
+    let (px, m_low, m_high) = (&px[..n], &m_low[..n], &m_high[..n]);
+    let mut one = |p: &[u8], l: &[u8], h: &[u8]| {
+        for ((&v, &vl), &vh) in p.iter().zip(l).zip(h) {
+            h_low[v as usize] = h_low[v as usize].wrapping_add((vl != 0) as u32);
+            h_high[v as usize] = h_high[v as usize].wrapping_add((vh != 0) as u32);
+        }
+    };
+    let (pc, lc, hc) = (
+        px.chunks_exact(16),
+        m_low.chunks_exact(16),
+        m_high.chunks_exact(16),
+    );
+    let (pr, lr, hr) = (pc.remainder(), lc.remainder(), hc.remainder());
+    for ((p, l), h) in pc.zip(lc).zip(hc) {
+        if l.iter().zip(h).fold(0u8, |acc, (&a, &b)| acc | a | b) != 0 {
+            one(p, l, h);
+        }
+    }
+    one(pr, lr, hr);
+}
+
+/// Sum and sum of squares of the grey levels of `px`.
+#[inline]
+pub fn sum_sumsq(px: &[u8]) -> (u64, u64) {
+    let (mut s1, mut s2) = (0u64, 0u64);
+    // 1024 · 255² < 2³², so each block's sums fit u32 (and vectorise)
+    for blk in px.chunks(1024) {
+        s1 += blk.iter().map(|&p| p as u32).sum::<u32>() as u64;
+        s2 += blk.iter().map(|&p| p as u32 * p as u32).sum::<u32>() as u64;
+    }
+    (s1, s2)
+}
+
 /// Folds a 256-bin histogram into `out.len()` bins (a power of two ≤ 256).
 pub fn fold_bins(hist: &[u32; 256], out: &mut [u32]) {
     out.fill(0);
@@ -298,6 +345,33 @@ mod tests {
             let mut got = [3u32; 256];
             add_row_256(&mut got, &row);
             proptest::prop_assert_eq!(got, want);
+        }
+        /// The block-skipping masked pair histogram equals a naive count.
+        #[test]
+        fn add_masked_pair_256_equals_naive(len in 0usize..200, seed in proptest::prelude::any::<u64>(), dens in 0u64..8) {
+            let mut s = seed | 1;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+            let px: std::vec::Vec<u8> = (0..len).map(|_| next() as u8).collect();
+            let ml: std::vec::Vec<u8> = (0..len).map(|_| if next() % 8 < dens { (next() as u8) | 1 } else { 0 }).collect();
+            let mh: std::vec::Vec<u8> = (0..len).map(|_| if next() % 16 < dens { 255 } else { 0 }).collect();
+            let (mut wl, mut wh) = ([1u32; 256], [2u32; 256]);
+            for i in 0..len {
+                if ml[i] != 0 { wl[px[i] as usize] += 1; }
+                if mh[i] != 0 { wh[px[i] as usize] += 1; }
+            }
+            let (mut gl, mut gh) = ([1u32; 256], [2u32; 256]);
+            add_masked_pair_256(&mut gl, &mut gh, &px, &ml, &mh);
+            proptest::prop_assert_eq!(gl, wl);
+            proptest::prop_assert_eq!(gh, wh);
+        }
+
+        /// The blocked sums equal naive u64 sums.
+        #[test]
+        fn sum_sumsq_equals_naive(len in 0usize..5000, seed in proptest::prelude::any::<u64>()) {
+            let mut s = seed | 1;
+            let px: std::vec::Vec<u8> = (0..len).map(|_| { s ^= s << 13; s ^= s >> 7; s ^= s << 17; if s % 3 == 0 { 255 } else { s as u8 } }).collect();
+            let want = (px.iter().map(|&p| p as u64).sum::<u64>(), px.iter().map(|&p| p as u64 * p as u64).sum::<u64>());
+            proptest::prop_assert_eq!(sum_sumsq(&px), want);
         }
     }
 }

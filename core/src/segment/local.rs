@@ -43,7 +43,8 @@ use super::workspace::{RoiBufs, STAT_WORDS};
 use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
 use crate::background::{BgGrid, BLOCK};
 use crate::hist::{
-    bin_of, fold_bins_range, median_mad, percentile_256, ratio_backprojection_lut_range,
+    add_masked_pair_256, add_row_256, bin_of, fold_bins_range, median_mad, percentile_256,
+    ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
@@ -180,6 +181,36 @@ pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
     (med as u8, (1.4826 * mad as f32).max(1.0))
 }
 
+/// The next run of equal non-zero labels in `l` at or after `i`: `(label,
+/// start, end)`. Zeros (background) are skipped and runs extended 16
+/// labels per test (one OR over the block, which vectorises).
+#[inline]
+fn next_run(l: &[i32], i: usize) -> Option<(i32, usize, usize)> {
+    let rest = l.get(i..)?;
+    let mut k = 0;
+    for blk in rest.chunks_exact(16) {
+        if blk.iter().fold(0, |acc, &x| acc | x) != 0 {
+            break;
+        }
+        k += 16;
+    }
+    let tail = rest.get(k..)?;
+    let z = tail.iter().position(|&x| x != 0)?;
+    let run = tail.get(z..)?;
+    let v = *run.first()?;
+    let mut m = 0;
+    for blk in run.chunks_exact(16) {
+        if blk.iter().fold(0, |acc, &x| acc | (x ^ v)) != 0 {
+            break;
+        }
+        m += 16;
+    }
+    let more = run.get(m..).unwrap_or(&[]);
+    m += more.iter().position(|&x| x != v).unwrap_or(more.len());
+    let start = i + k + z;
+    Some((v, start, start + m))
+}
+
 /// Clears `rec` to an empty statistics record.
 fn clear_rec(rec: &mut [u64; STAT_WORDS]) {
     *rec = [0; STAT_WORDS];
@@ -265,11 +296,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     let mut h256 = [0u32; 256];
     let mut total = 0u64;
     for (j, sp) in spans.iter().enumerate() {
-        let row = sv.row(j);
-        for &p in row.get(sp[0] as usize..sp[1] as usize).unwrap_or(&[]) {
-            h256[p as usize] += 1;
-            total += 1;
-        }
+        let row = sv.row(j).get(span(sp)).unwrap_or(&[]);
+        add_row_256(&mut h256, row);
+        total += row.len() as u64;
     }
     if total == 0 {
         stats.regions_empty += 1;
@@ -333,10 +362,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                 &c[j * rw..(j + 1) * rw][r.clone()],
                 &a[j * rw..(j + 1) * rw][r],
             );
-            for ((&p, &vc), &va) in row.iter().zip(rc).zip(ra) {
-                hl[p as usize] += (vc != 0) as u32;
-                hh[p as usize] += (va != 0) as u32;
-            }
+            add_masked_pair_256(&mut hl, &mut hh, row, rc, ra);
         }
         let bins = (params.hist_bins as usize).clamp(1, 256);
         let (mut bl, mut bh) = ([0u32; 256], [0u32; 256]);
@@ -345,13 +371,14 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         fold_bins_range(&hl, lo, hi, &mut bl[..bins]);
         fold_bins_range(&hh, lo, hi, &mut bh[..bins]);
         let lut = ratio_backprojection_lut_range(&bh[..bins], &bl[..bins], lo, hi, params.theta_bp);
+        let lut = lut.map(|v| if v { 255u8 } else { 0 });
         for (j, sp) in spans.iter().enumerate() {
             let r = span(sp);
             let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
             let rb = &mut b[j * rw..(j + 1) * rw];
             rb.fill(0);
             for (&p, vb) in row.iter().zip(&mut rb[r]) {
-                *vb = if lut[p as usize] { 255 } else { 0 };
+                *vb = lut[p as usize];
             }
         }
     } else {
@@ -381,15 +408,21 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let row = pv.row(j).get(r.clone()).unwrap_or(&[]);
         let srow = sv.row(j).get(r.clone()).unwrap_or(&[]);
         let lrow = &labels[j * rw..(j + 1) * rw][r];
-        for ((&p, &q), &l) in row.iter().zip(srow).zip(lrow) {
-            if l > 0 {
-                if let Some(rec) = recs.get_mut(l as usize - 1).filter(|_| (l as usize) <= n1s) {
-                    rec[0] += 1;
-                    rec[10] += p as u64;
-                    rec[11] += p as u64 * p as u64;
-                    rec[12] += q as u64;
-                }
+        let mut i = 0;
+        while let Some((l, i0, i1)) = next_run(lrow, i) {
+            i = i1;
+            if l <= 0 || l as usize > n1s {
+                continue;
             }
+            let Some(rec) = recs.get_mut(l as usize - 1) else {
+                continue;
+            };
+            let (s1, s2) = sum_sumsq(row.get(i0..i1).unwrap_or(&[]));
+            let (q1, _) = sum_sumsq(srow.get(i0..i1).unwrap_or(&[]));
+            rec[0] += (i1 - i0) as u64;
+            rec[10] += s1;
+            rec[11] += s2;
+            rec[12] += q1;
         }
     }
     // the water of eq. (1)'s lower class, for the contrast test
@@ -432,8 +465,14 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let ra = &mut a[j * rw..(j + 1) * rw];
         ra.fill(0);
         let lrow = &labels[j * rw..(j + 1) * rw][r.clone()];
-        for (bv, &l) in ra[r].iter_mut().zip(lrow) {
-            *bv = acc.get(l.max(0) as usize).copied().unwrap_or(0);
+        let ra = &mut ra[r];
+        let mut i = 0;
+        while let Some((l, i0, i1)) = next_run(lrow, i) {
+            i = i1;
+            let v = acc.get(l.max(0) as usize).copied().unwrap_or(0);
+            if let Some(part) = ra.get_mut(i0..i1) {
+                part.fill(v);
+            }
         }
     }
 
@@ -457,26 +496,23 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let lrow = &labels[j * rw..(j + 1) * rw];
         let y = roi.y + j as u32;
         let mut i = 0usize;
-        while i < rw {
-            let l = lrow[i];
+        while let Some((l, i0, i1)) = next_run(lrow, i) {
+            i = i1;
             if l <= 0 || l as usize > n2s {
-                i += 1;
                 continue;
             }
-            let i0 = i;
             let Some(rec) = recs.get_mut(l as usize - 1) else {
-                i += 1;
                 continue;
             };
-            while i < rw && lrow[i] == l {
-                let p = row.get(i).copied().unwrap_or(0);
-                rec[10] += p as u64;
-                rec[11] += p as u64 * p as u64;
+            let px = row.get(i0..i1).unwrap_or(&[]);
+            let (s1, s2) = sum_sumsq(px);
+            rec[10] += s1;
+            rec[11] += s2;
+            for &p in px {
                 rec[12 + bin_of(p, HIST_BINS)] += 1;
-                i += 1;
             }
             let mut m = Moments::from_words(&rec[..10]);
-            m.add_run(y, roi.x + i0 as u32, roi.x + i as u32);
+            m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
             m.to_words(&mut rec[..10]);
         }
     }
@@ -505,4 +541,43 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         emit(out, &cand, &mask, stats);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    extern crate std;
+    use std::vec::Vec;
+
+    proptest::proptest! {
+        /// [`next_run`] walks the same runs of equal non-zero labels as a
+        /// pixel-by-pixel scan.
+        #[test]
+        fn next_run_equals_scan(len in 0usize..300, seed in proptest::prelude::any::<u64>(), dens in 0u64..8) {
+            let mut s = seed | 1;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+            let mut l: Vec<i32> = Vec::new();
+            while l.len() < len {
+                let v = if next() % 8 < dens { (next() % 5) as i32 - 1 } else { 0 };
+                let k = (next() % 40) as usize;
+                l.extend(core::iter::repeat_n(v, k.min(len - l.len()).max(1)));
+            }
+            l.truncate(len);
+            let mut want = Vec::new();
+            let mut i = 0;
+            while i < l.len() {
+                if l[i] == 0 { i += 1; continue; }
+                let i0 = i;
+                while i < l.len() && l[i] == l[i0] { i += 1; }
+                want.push((l[i0], i0, i));
+            }
+            let mut got = Vec::new();
+            let mut i = 0;
+            while let Some(r) = next_run(&l, i) {
+                i = r.2;
+                got.push(r);
+            }
+            proptest::prop_assert_eq!(got, want);
+        }
+    }
 }
