@@ -181,6 +181,11 @@ pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
     (med as u8, (1.4826 * mad as f32).max(1.0))
 }
 
+/// Row `j` of a `rw`-wide label buffer (empty past its end: never panics).
+fn row_of(labels: &[i32], j: usize, rw: usize) -> &[i32] {
+    labels.get(j * rw..(j + 1) * rw).unwrap_or(&[])
+}
+
 /// The next run of equal non-zero labels in `l` at or after `i`: `(label,
 /// start, end)`. Zeros (background) are skipped and runs extended 16
 /// labels per test (one OR over the block, which vectorises).
@@ -407,7 +412,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let r = span(sp);
         let row = pv.row(j).get(r.clone()).unwrap_or(&[]);
         let srow = sv.row(j).get(r.clone()).unwrap_or(&[]);
-        let lrow = &labels[j * rw..(j + 1) * rw][r];
+        let lrow = row_of(labels, j, rw).get(r).unwrap_or(&[]);
         let mut i = 0;
         while let Some((l, i0, i1)) = next_run(lrow, i) {
             i = i1;
@@ -464,7 +469,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let r = span(sp);
         let ra = &mut a[j * rw..(j + 1) * rw];
         ra.fill(0);
-        let lrow = &labels[j * rw..(j + 1) * rw][r.clone()];
+        let lrow = row_of(labels, j, rw).get(r.clone()).unwrap_or(&[]);
         let ra = &mut ra[r];
         let mut i = 0;
         while let Some((l, i0, i1)) = next_run(lrow, i) {
@@ -493,7 +498,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     }
     for j in 0..rh {
         let row = pv.row(j);
-        let lrow = &labels[j * rw..(j + 1) * rw];
+        let lrow = row_of(labels, j, rw);
         let y = roi.y + j as u32;
         let mut i = 0usize;
         while let Some((l, i0, i1)) = next_run(lrow, i) {
