@@ -708,28 +708,55 @@ fn line_stage<const MAX: bool>(
         5 => line_inputs::<MAX, 5>(ring, identity, y, h, pw, dir, dst),
         7 => line_inputs::<MAX, 7>(ring, identity, y, h, pw, dir, dst),
         _ => {
-            let base = (y + k - half % k) % k;
             let mut srcs: [&[u8]; 2 * (MAX_SE / 2) + 1] = [&[]; 2 * (MAX_SE / 2) + 1];
+            let base = line_base(y, k);
             for (i, s) in srcs.iter_mut().take(k).enumerate() {
-                let inside = (y + i).checked_sub(half).is_some_and(|yy| yy < h);
-                let sl = if base + i >= k {
-                    base + i - k
-                } else {
-                    base + i
-                };
-                let row = if inside {
-                    ring.get(sl * pw..(sl + 1) * pw).unwrap_or(&[])
-                } else {
-                    identity
-                };
-                let start = match dir {
-                    Diagonal::Main => i,
-                    Diagonal::Anti => 2 * half - i,
-                };
-                *s = row.get(start..start + w).unwrap_or(&[]);
+                *s = line_src(ring, identity, y, h, k, base, pw, w, dir, i);
             }
             reduce::<MAX>(dst, &srcs[..k]);
         }
+    }
+}
+
+/// Ring slot of row `y − half` for a line of `k = 2·half + 1` pixels.
+fn line_base(y: usize, k: usize) -> usize {
+    (y + k - k / 2) % k
+}
+
+/// Input `i` of row `y` of a diagonal line of `k = 2·half + 1` pixels: row
+/// `y − half + i` (slot `(base + i) mod k` of `ring`, `base` = [`line_base`],
+/// or `identity` outside `0..h`), shifted along the diagonal, `w` bytes.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn line_src<'a>(
+    ring: &'a [u8],
+    identity: &'a [u8],
+    y: usize,
+    h: usize,
+    k: usize,
+    base: usize,
+    pw: usize,
+    w: usize,
+    dir: Diagonal,
+    i: usize,
+) -> &'a [u8] {
+    let half = k / 2;
+    // input i is row y − half + i, in slot base + i (mod k)
+    let sl = if base + i >= k {
+        base + i - k
+    } else {
+        base + i
+    };
+    let start = match dir {
+        Diagonal::Main => i,
+        Diagonal::Anti => 2 * half - i,
+    };
+    // row y − half + i inside 0..h (wrapping: rows above 0 are huge)
+    if (y + i).wrapping_sub(half) < h {
+        ring.get(sl * pw + start..sl * pw + start + w)
+            .unwrap_or(&[])
+    } else {
+        identity.get(start..start + w).unwrap_or(&[])
     }
 }
 
@@ -744,28 +771,9 @@ fn line_inputs<const MAX: bool, const K: usize>(
     dir: Diagonal,
     dst: &mut [u8],
 ) {
-    let half = K / 2;
-    let w = dst.len();
-    // slot of row y − half; input i is row y − half + i, slot + i (mod K)
-    let base = (y + K - half) % K;
-    let srcs: [&[u8]; K] = core::array::from_fn(|i| {
-        let sl = if base + i >= K {
-            base + i - K
-        } else {
-            base + i
-        };
-        let start = match dir {
-            Diagonal::Main => i,
-            Diagonal::Anti => 2 * half - i,
-        };
-        // row y − half + i inside 0..h (wrapping: rows above 0 are huge)
-        if (y + i).wrapping_sub(half) < h {
-            ring.get(sl * pw + start..sl * pw + start + w)
-                .unwrap_or(&[])
-        } else {
-            identity.get(start..start + w).unwrap_or(&[])
-        }
-    });
+    let (w, base) = (dst.len(), line_base(y, K));
+    let srcs: [&[u8]; K] =
+        core::array::from_fn(|i| line_src(ring, identity, y, h, K, base, pw, w, dir, i));
     reduce_k::<MAX, K>(dst, &srcs);
 }
 
