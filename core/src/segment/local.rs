@@ -186,6 +186,19 @@ fn row_of(labels: &[i32], j: usize, rw: usize) -> &[i32] {
     labels.get(j * rw..(j + 1) * rw).unwrap_or(&[])
 }
 
+/// The runs of labels `1..=n` in a label row: `(label − 1, start, end)`
+/// ([`next_run`], other labels skipped).
+fn label_runs(lrow: &[i32], n: usize) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+    let mut i = 0;
+    core::iter::from_fn(move || loop {
+        let (l, i0, i1) = next_run(lrow, i)?;
+        i = i1;
+        if l > 0 && l as usize <= n {
+            return Some((l as usize - 1, i0, i1));
+        }
+    })
+}
+
 /// The next run of equal non-zero labels in `l` at or after `i`: `(label,
 /// start, end)`. Zeros (background) are skipped and runs extended 16
 /// labels per test (one OR over the block, which vectorises).
@@ -413,13 +426,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let row = pv.row(j).get(r.clone()).unwrap_or(&[]);
         let srow = sv.row(j).get(r.clone()).unwrap_or(&[]);
         let lrow = row_of(labels, j, rw).get(r).unwrap_or(&[]);
-        let mut i = 0;
-        while let Some((l, i0, i1)) = next_run(lrow, i) {
-            i = i1;
-            if l <= 0 || l as usize > n1s {
-                continue;
-            }
-            let Some(rec) = recs.get_mut(l as usize - 1) else {
+        for (k, i0, i1) in label_runs(lrow, n1s) {
+            let Some(rec) = recs.get_mut(k) else {
                 continue;
             };
             let (s1, s2) = sum_sumsq(row.get(i0..i1).unwrap_or(&[]));
@@ -467,10 +475,12 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     // (labels are 0 outside the ellipse)
     for (j, sp) in spans.iter().enumerate() {
         let r = span(sp);
-        let ra = &mut a[j * rw..(j + 1) * rw];
+        let Some(ra) = a.get_mut(j * rw..(j + 1) * rw) else {
+            break;
+        };
         ra.fill(0);
         let lrow = row_of(labels, j, rw).get(r.clone()).unwrap_or(&[]);
-        let ra = &mut ra[r];
+        let ra = ra.get_mut(r).unwrap_or(&mut []);
         let mut i = 0;
         while let Some((l, i0, i1)) = next_run(lrow, i) {
             i = i1;
@@ -500,13 +510,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let row = pv.row(j);
         let lrow = row_of(labels, j, rw);
         let y = roi.y + j as u32;
-        let mut i = 0usize;
-        while let Some((l, i0, i1)) = next_run(lrow, i) {
-            i = i1;
-            if l <= 0 || l as usize > n2s {
-                continue;
-            }
-            let Some(rec) = recs.get_mut(l as usize - 1) else {
+        for (k, i0, i1) in label_runs(lrow, n2s) {
+            let Some(rec) = recs.get_mut(k) else {
                 continue;
             };
             let px = row.get(i0..i1).unwrap_or(&[]);
