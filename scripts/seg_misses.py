@@ -2,7 +2,7 @@
 """Classify the segmentation misses of FishTrack's `detections.csv` (issue 4).
 
 Usage:
-    seg_misses.py HAUL DETECTIONS.csv [HAUL DETECTIONS.csv ...]
+    seg_misses.py [--alpha A] HAUL DETECTIONS.csv [HAUL DETECTIONS.csv ...]
 
 HAUL is a `fishtrack synth` haul (truth.json, calibration.yml, left/NNNNNN.png).
 
@@ -11,7 +11,8 @@ to the frame) that no detection matches at IoU >= 0.4, prints its class:
 
 - outside view: more than half of the truth box lies outside the raw pixels
   that the rectified left view sees (cv2.stereoRectify with
-  CALIB_ZERO_DISPARITY and alpha 0, as FishTrack rectifies), i.e. the crop;
+  CALIB_ZERO_DISPARITY and alpha A, default 0.25 as FishTrack rectifies),
+  i.e. the crop;
 - hit if clipped: a detection matches the truth box clipped to that view;
 - cut by frame: visible fraction < 0.5 (object / no object);
 - touching / isolated (another truth box intersects or not), with an object
@@ -50,14 +51,14 @@ def cover(a, b):
     return ix * iy / (aw * ah + 1e-9)
 
 
-def rectified_view_mask(haul):
+def rectified_view_mask(haul, alpha):
     """Raw left pixels that the rectified left view samples."""
     fs = cv2.FileStorage(f"{haul}/calibration.yml", cv2.FILE_STORAGE_READ)
     g = lambda k: fs.getNode(k).mat()
     w, h = int(fs.getNode("image_width").real()), int(fs.getNode("image_height").real())
     r1, _, p1, _, _, _, _ = cv2.stereoRectify(
         g("M1"), g("D1"), g("M2"), g("D2"), (w, h), g("R"), g("T"),
-        flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
+        flags=cv2.CALIB_ZERO_DISPARITY, alpha=alpha)
     mx, my = cv2.initUndistortRectifyMap(g("M1"), g("D1"), r1, p1, (w, h), cv2.CV_32FC1)
     border = np.concatenate([
         np.stack([mx[0], my[0]], 1),
@@ -82,6 +83,10 @@ def contrast(img, b):
 
 
 def main(args):
+    alpha = 0.25
+    if args[:1] == ["--alpha"] and len(args) > 1:
+        alpha = float(args[1])
+        args = args[2:]
     if len(args) < 2 or len(args) % 2:
         sys.exit(__doc__)
     classes = Counter()
@@ -90,7 +95,7 @@ def main(args):
     for haul, det in zip(args[0::2], args[1::2]):
         t = json.load(open(f"{haul}/truth.json"))
         amin = 2000 * (t["width"] / 2048) ** 2
-        view = rectified_view_mask(haul)
+        view = rectified_view_mask(haul, alpha)
         dets = defaultdict(list)
         for r in csv.reader(open(det)):
             dets[int(r[0])].append([float(v) for v in r[2:6]])
