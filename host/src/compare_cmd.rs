@@ -3,7 +3,8 @@
 //! segmentation of both views ([`crate::reference::compare`]: thresholds
 //! within 1 grey level, identical object sets, mask IoU ≥ 0.99), stereo
 //! pairs and lengths ([`crate::reference::stereo::compare`] on the core's
-//! objects: identical pairs, lengths within 0.5 %), and track assignments
+//! objects: identical pairs, usable lengths within 0.5 % and the same ones
+//! withheld, withheld lengths within 0.5 % too), and track assignments
 //! ([`crate::reference::track`] on the observations the pipeline built:
 //! identical). Prints an agreement table; any disagreement is an error
 //! (exit 1).
@@ -55,6 +56,7 @@ pub fn run(dir: &Path) -> Result<()> {
     let geom = Geometry::from_core(&setup.geometry);
     let limits = Limits::from(&cfg.pairing);
     let (mut seg, mut pairs, mut lengths) = (Tally::default(), Tally::default(), Tally::default());
+    let mut raw_lengths = Tally::default();
     let mut all_obs = Vec::new();
     let mut core_asg: Vec<Assignment> = Vec::new();
     let on_event = |e: &PipelineEvent, out: &mut Vec<Assignment>| {
@@ -103,7 +105,7 @@ pub fn run(dir: &Path) -> Result<()> {
             h,
         };
         let ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
-        let reference: Vec<(usize, usize, Option<f64>)> = ref_pairs
+        let reference_raw: Vec<(usize, usize, Option<rs::RefLength>)> = ref_pairs
             .iter()
             .map(|p| {
                 // lengths are measured for pairs wholly inside both views only
@@ -119,12 +121,15 @@ pub fn run(dir: &Path) -> Result<()> {
                 let len = inside
                     .then(|| rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length))
                     .flatten();
-                // only usable lengths: both sides must withhold the same ones
-                let len = len.filter(|v| v.consistent);
-                (p.left, p.right, len.map(|v| v.length))
+                (p.left, p.right, len)
             })
             .collect();
-        let core: Vec<(usize, usize, Option<f64>)> = pipe
+        // only usable lengths: both sides must withhold the same ones
+        let reference: Vec<(usize, usize, Option<f64>)> = reference_raw
+            .iter()
+            .map(|&(a, b, l)| (a, b, l.filter(|v| v.consistent).map(|v| v.length)))
+            .collect();
+        let core_raw: Vec<(usize, usize, Option<(f64, bool)>)> = pipe
             .pairs()
             .pairs
             .iter()
@@ -133,11 +138,38 @@ pub fn run(dir: &Path) -> Result<()> {
                 (
                     p.left as usize,
                     p.right as usize,
-                    l.filter(|v| v.consistent).map(|v| v.length_mm as f64),
+                    l.map(|v| (v.length_mm as f64, v.consistent)),
                 )
             })
             .collect();
+        let core: Vec<(usize, usize, Option<f64>)> = core_raw
+            .iter()
+            .map(|&(a, b, l)| (a, b, l.filter(|v| v.1).map(|v| v.0)))
+            .collect();
         let a = rs::compare(&core, &reference);
+        // the withheld lengths as well: the same end points and snakes
+        // must give the same figure even where the gates then drop it
+        let core_withheld: Vec<(usize, usize, Option<f64>)> = core_raw
+            .iter()
+            .map(|&(a, b, l)| (a, b, l.filter(|v| !v.1).map(|v| v.0)))
+            .collect();
+        let reference_withheld: Vec<(usize, usize, Option<f64>)> = reference_raw
+            .iter()
+            .map(|&(a, b, l)| (a, b, l.filter(|v| !v.consistent).map(|v| v.length)))
+            .collect();
+        let ra = rs::compare(&core_withheld, &reference_withheld);
+        raw_lengths.add(
+            ra.measured_by_one == 0 && ra.max_length_rel_diff <= 0.005,
+            ra.max_length_rel_diff,
+            || {
+                format!(
+                    "frame {}: largest withheld-length difference {:.3} %, {} pairs withheld by one side only",
+                    pair.index,
+                    100.0 * ra.max_length_rel_diff,
+                    ra.measured_by_one
+                )
+            },
+        );
         pairs.add(a.pairs_identical, 0.0, || {
             format!(
                 "frame {}: core pairs {:?}, reference pairs {:?}",
@@ -200,6 +232,11 @@ pub fn run(dir: &Path) -> Result<()> {
         &lengths,
         format!("{:.3} %", 100.0 * lengths.worst),
     );
+    line(
+        "withheld stereo lengths within 0.5 %",
+        &raw_lengths,
+        format!("{:.3} %", 100.0 * raw_lengths.worst),
+    );
     println!(
         "{:<52} {:>12} {:>10}  {}",
         "track assignments identical",
@@ -212,6 +249,7 @@ pub fn run(dir: &Path) -> Result<()> {
         ("segmentation", &seg),
         ("stereo pairs", &pairs),
         ("stereo lengths", &lengths),
+        ("withheld stereo lengths", &raw_lengths),
     ] {
         if let Some(f) = &t.first_fail {
             println!("first {name} disagreement: {f}");
