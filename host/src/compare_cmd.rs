@@ -21,6 +21,9 @@ use crate::reference::stereo::{self as rs, Geometry, Gray, Limits};
 use crate::reference::track::{self as rt, Assignment, Capacities};
 use crate::track_cmd::{new_pipeline, prepare, views, TrackOptions};
 
+/// A stereo pair (left, right object index) and its length, if any.
+type PairLength<T> = (usize, usize, Option<T>);
+
 #[derive(Default)]
 struct Tally {
     frames: usize,
@@ -105,7 +108,7 @@ pub fn run(dir: &Path) -> Result<()> {
             h,
         };
         let ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
-        let reference_raw: Vec<(usize, usize, Option<rs::RefLength>)> = ref_pairs
+        let reference_raw: Vec<PairLength<rs::RefLength>> = ref_pairs
             .iter()
             .map(|p| {
                 // lengths are measured for pairs wholly inside both views only
@@ -125,11 +128,11 @@ pub fn run(dir: &Path) -> Result<()> {
             })
             .collect();
         // only usable lengths: both sides must withhold the same ones
-        let reference: Vec<(usize, usize, Option<f64>)> = reference_raw
+        let reference: Vec<PairLength<f64>> = reference_raw
             .iter()
             .map(|&(a, b, l)| (a, b, l.filter(|v| v.consistent).map(|v| v.length)))
             .collect();
-        let core_raw: Vec<(usize, usize, Option<(f64, bool)>)> = pipe
+        let core_raw: Vec<PairLength<(f64, bool)>> = pipe
             .pairs()
             .pairs
             .iter()
@@ -142,18 +145,18 @@ pub fn run(dir: &Path) -> Result<()> {
                 )
             })
             .collect();
-        let core: Vec<(usize, usize, Option<f64>)> = core_raw
+        let core: Vec<PairLength<f64>> = core_raw
             .iter()
             .map(|&(a, b, l)| (a, b, l.filter(|v| v.1).map(|v| v.0)))
             .collect();
         let a = rs::compare(&core, &reference);
         // the withheld lengths as well: the same end points and snakes
         // must give the same figure even where the gates then drop it
-        let core_withheld: Vec<(usize, usize, Option<f64>)> = core_raw
+        let core_withheld: Vec<PairLength<f64>> = core_raw
             .iter()
             .map(|&(a, b, l)| (a, b, l.filter(|v| !v.1).map(|v| v.0)))
             .collect();
-        let reference_withheld: Vec<(usize, usize, Option<f64>)> = reference_raw
+        let reference_withheld: Vec<PairLength<f64>> = reference_raw
             .iter()
             .map(|&(a, b, l)| (a, b, l.filter(|v| !v.consistent).map(|v| v.length)))
             .collect();
