@@ -48,8 +48,20 @@ fn success(hauls: &[TruthObs], assoc: Assoc, cues: Cues) -> (u64, u64) {
 
 /// Diagnostic overrides: FISHTRACK_TT="miss gate sv sv0 minsamp birth maxlost
 /// [cap share σ_a σ_m σ_h σ_d lost_gate swap_passes area_robust hist_robust]"
-/// (defaults: `24 48 250 350 32 2 1 inf 24 0.25 0.5 1 0.04 6 4 inf inf`).
+/// (defaults: `24 48 250 350 32 2 1 inf 24 0.25 0.5 1 0.04 6 4 inf inf`);
+/// FISHTRACK_RULES="fold=0 …" switches the round-5 rules
+/// (`fold_shared`).
 fn tweak(cfg: &mut TrackConfig) {
+    if let Ok(v) = std::env::var("FISHTRACK_RULES") {
+        for kv in v.split_whitespace() {
+            let (k, x) = kv.split_once('=').unwrap();
+            let on = x != "0";
+            match k {
+                "fold" => cfg.fold_shared = on,
+                _ => panic!("FISHTRACK_RULES: unknown rule {k}"),
+            }
+        }
+    }
     let Ok(v) = std::env::var("FISHTRACK_TT") else {
         return;
     };
@@ -191,7 +203,8 @@ fn table_v_and_fig15_on_truth() {
         for to in &full {
             let mut p = Params::for_frame(to.truth.width);
             p.tracker = a;
-            let cfg = TrackConfig::for_frame(to.truth.width, to.truth.height);
+            let mut cfg = TrackConfig::for_frame(to.truth.width, to.truth.height);
+            tweak(&mut cfg);
             let s = score(to, &run_tracker(to, &p, cfg)).unwrap();
             tracks += s.count.tracks;
             fish += s.count.fish;

@@ -644,3 +644,65 @@ fn run_core_full_cfg(
     tr.finish(&mut sink);
     out
 }
+
+/// Folding shared tracks (`TrackConfig::fold_shared`, round 5): it only
+/// removes whole tracks — with it on, the assignments are those with it off
+/// less some tracks, and every observation of a removed track is claimed
+/// by a kept track in the same frame — and core and reference fold
+/// identically.
+#[test]
+fn fold_shared_removes_only_duplicated_tracks() {
+    use std::collections::BTreeSet;
+    let mut off = TrackConfig::for_frame(W, W);
+    off.fold_shared = false;
+    let mut on = off;
+    on.fold_shared = true;
+    let p = Params {
+        tracker: Assoc::Viterbi,
+        ..Params::for_frame(W)
+    };
+    let mut folded = 0usize;
+    for seed in 0..SEEDS {
+        let h0 = simulate(seed, FRAMES);
+        for h in [thin(&h0), h0] {
+            let a_off = run_core_full_cfg(&h, Assoc::Viterbi, off);
+            let a_on = run_core_full_cfg(&h, Assoc::Viterbi, on);
+            let r_on =
+                reference::track::run(&h.frames, &p, &on, reference::track::Capacities::DEFAULT);
+            let rep = reference::track::compare(&a_on, &r_on);
+            assert!(rep.identical(), "seed {seed}: {rep:?}");
+            let set_on: BTreeSet<_> = a_on.iter().copied().collect();
+            let kept: BTreeSet<u32> = a_on.iter().map(|a| a.track).collect();
+            let removed: BTreeSet<u32> = a_off
+                .iter()
+                .map(|a| a.track)
+                .filter(|t| !kept.contains(t))
+                .collect();
+            for a in &a_off {
+                if removed.contains(&a.track) {
+                    // its observations are another (kept) track's
+                    if let Some(o) = a.obs {
+                        assert!(
+                            a_on.iter().any(|b| b.frame == a.frame && b.obs == Some(o)),
+                            "seed {seed}: folded track {} held frame {} obs {o} alone",
+                            a.track,
+                            a.frame
+                        );
+                    }
+                } else {
+                    assert!(set_on.contains(a), "seed {seed}: {a:?} changed by folding");
+                }
+            }
+            assert_eq!(
+                a_on.len() + a_off.iter().filter(|a| removed.contains(&a.track)).count(),
+                a_off.len()
+            );
+            folded += removed.len();
+        }
+    }
+    println!("fold_shared: {folded} tracks folded over {SEEDS} seeds at 5 and 2.5 fps");
+    assert!(
+        folded > 0,
+        "no track folded: the test does not exercise the rule"
+    );
+}

@@ -159,6 +159,20 @@ struct Target {
     stages: Vec<(u32, Vec<Node>)>,
     front: Vec<State>,
     closed: bool,
+    /// Closed as a duplicate (nothing more committed).
+    dup: bool,
+    /// Close decided this frame, carried out after every target stepped.
+    pending: bool,
+    /// Committed path: (frame, observation).
+    path: Vec<(u32, Option<usize>)>,
+}
+
+/// Recently closed tracks' observations, as the core's ring
+/// (`fishtrack_core::track::RECENT` slots, the oldest overwritten):
+/// (track, frame, observation, the track's observations).
+struct Recent {
+    slots: Vec<Option<(u32, u32, usize, u32)>>,
+    next: usize,
 }
 
 #[derive(Default)]
@@ -338,6 +352,10 @@ pub fn run(
     let mut targets: Vec<Target> = Vec::new();
     let mut sig = Sig::default();
     let mut next_id = 1u32;
+    let mut recent = Recent {
+        slots: vec![None; fishtrack_core::track::RECENT],
+        next: 0,
+    };
     let d0 = &cfg.sigma_defaults;
     let defaults = [
         d0.v as f64,
@@ -617,7 +635,7 @@ pub fn run(
                 }
             }
             if new.is_empty() {
-                close(t, &mut out);
+                t.pending = true;
                 continue;
             }
             let bi =
@@ -645,11 +663,11 @@ pub fn run(
             if best.vel_known && new_best_lost {
                 let q = best.left.pos;
                 if !(q[0] >= m && q[0] < w - m && q[1] >= m && q[1] < h - m) {
-                    close(t, &mut out);
+                    t.pending = true;
                 }
             }
             if new_best_lost && best.lost > cfg.max_lost as u32 {
-                close(t, &mut out);
+                t.pending = true;
             }
         }
         // Duplicate trellises: same observations in the last two frames of
@@ -659,7 +677,11 @@ pub fn run(
         if p.tracker == Assoc::Viterbi {
             for i in 0..targets.len() {
                 for j in (i + 1)..targets.len() {
-                    if targets[i].closed || targets[j].closed {
+                    if targets[i].closed
+                        || targets[j].closed
+                        || targets[i].pending
+                        || targets[j].pending
+                    {
                         continue;
                     }
                     let (ki, kj) = (last_two(&targets[i]), last_two(&targets[j]));
@@ -681,9 +703,12 @@ pub fn run(
                         j
                     };
                     targets[d].closed = true; // nothing more committed
+                    targets[d].dup = true;
                 }
             }
         }
+        let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
+        resolve_closes(&mut targets, fold, &mut recent, &mut out);
         targets.retain(|t| !t.closed);
 
         // Births.
@@ -744,14 +769,103 @@ pub fn run(
                     lost: 0,
                 }],
                 closed: false,
+                dup: false,
+                pending: false,
+                path: Vec::new(),
             });
             next_id += 1;
         }
     }
     for t in targets.iter_mut() {
-        close(t, &mut out);
+        t.pending = true;
     }
+    let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
+    resolve_closes(&mut targets, fold, &mut recent, &mut out);
     out
+}
+
+/// Carries out the closes decided this frame in birth order; with `fold`,
+/// a track that committed nothing and whose every observation lies on
+/// another live or recently closed track with at least as many
+/// observations is a duplicate and outputs nothing.
+fn resolve_closes(
+    targets: &mut [Target],
+    fold: bool,
+    recent: &mut Recent,
+    out: &mut Vec<Assignment>,
+) {
+    for i in 0..targets.len() {
+        if !targets[i].pending {
+            continue;
+        }
+        targets[i].pending = false;
+        if fold && is_shared(targets, i, recent) {
+            targets[i].closed = true;
+            targets[i].dup = true;
+            continue;
+        }
+        close(&mut targets[i], out);
+        if !fold {
+            continue;
+        }
+        let t = &targets[i];
+        for &(f, o) in &t.path {
+            if let Some(o) = o {
+                let n = recent.slots.len();
+                recent.slots[recent.next] = Some((t.id, f, o, t.hits));
+                recent.next = (recent.next + 1) % n;
+            }
+        }
+    }
+}
+
+/// Real (frame, observation) steps of the best uncommitted path.
+fn real_steps(t: &Target) -> Vec<(u32, usize)> {
+    let path = best_path(t);
+    (0..t.stages.len())
+        .filter_map(|s| t.stages[s].1[path[s]].obs.map(|o| (t.stages[s].0, o)))
+        .collect()
+}
+
+fn is_shared(targets: &[Target], i: usize, recent: &Recent) -> bool {
+    let t = &targets[i];
+    if !t.path.is_empty() {
+        return false;
+    }
+    let mine = real_steps(t);
+    let n = mine.len() as u32;
+    if n == 0 {
+        return false;
+    }
+    for (j, o) in targets.iter().enumerate() {
+        if j == i || o.dup {
+            continue;
+        }
+        let ev = if o.closed { o.hits } else { evidence(o) };
+        if ev < n {
+            continue;
+        }
+        let steps = real_steps(o);
+        if mine
+            .iter()
+            .all(|&(f, ob)| o.path.contains(&(f, Some(ob))) || steps.contains(&(f, ob)))
+        {
+            return true;
+        }
+    }
+    let (f0, o0) = mine[0];
+    recent.slots.iter().flatten().any(|&(id, f, o, ev)| {
+        ev >= n
+            && f == f0
+            && o == o0
+            && mine.iter().all(|&(mf, mo)| {
+                recent
+                    .slots
+                    .iter()
+                    .flatten()
+                    .any(|&(qi, qf, qo, _)| qi == id && qf == mf && qo == mo)
+            })
+    })
 }
 
 /// Path (node index per stage) ending at the cheapest front node.
@@ -812,6 +926,7 @@ fn commit_oldest(t: &mut Target, out: &mut Vec<Assignment>) {
     let chosen = path[0];
     let (frame, nodes) = t.stages.remove(0);
     t.hits += nodes[chosen].obs.is_some() as u32;
+    t.path.push((frame, nodes[chosen].obs));
     out.push(Assignment {
         frame,
         track: t.id,
@@ -856,6 +971,9 @@ fn close(t: &mut Target, out: &mut Vec<Assignment>) {
         .find(|&s| t.stages[s].1[path[s]].obs.is_some());
     if let Some(lr) = last_real {
         for s in 0..=lr {
+            let o = t.stages[s].1[path[s]].obs;
+            t.hits += o.is_some() as u32;
+            t.path.push((t.stages[s].0, o));
             out.push(Assignment {
                 frame: t.stages[s].0,
                 track: t.id,
