@@ -3,7 +3,7 @@
 tracking round 5): tracks - countable fish = split + duplicate + false +
 non-countable - missed.
 
-    python3 host/tests/track_accounting.py HAUL OUT [-v]
+    python3 scripts/track_accounting.py HAUL OUT [-v]
 
 A fish frame is countable when its visible left area >= theta_A^L (2000 px
 at 2048, scaled by the frame area, as `fishtrack eval`); boxes of tracks.csv
