@@ -105,6 +105,11 @@ pub struct Params {
     /// little texture has a small variance but a clear contrast. 0 turns
     /// the rescue off.
     pub contrast_sigmas: f32,
+    /// Whether merged objects are split where the object's pixels, raised
+    /// above a threshold between ⌊τ_low⌋ and their maximum, fall into
+    /// stable elongated parts (beyond the paper; touching fish,
+    /// `crate::segment::split`). `false` is the pipeline without it.
+    pub split_merged: bool,
 
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
     /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
@@ -152,6 +157,7 @@ impl Default for Params {
             background: true,
             background_radius: 5,
             contrast_sigmas: 3.0,
+            split_merged: true,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,

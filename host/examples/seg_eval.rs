@@ -28,6 +28,7 @@ fn main() -> Result<()> {
     let (mut var_min, mut elong): (Option<f32>, Option<f32>) = (None, None);
     let mut smooth: Option<u8> = None;
     let mut no_bg = false;
+    let mut no_split = false;
     let mut bg_r: Option<u8> = None;
     let mut csig: Option<f32> = None;
     let mut out = std::env::temp_dir().join("seg_eval");
@@ -40,6 +41,7 @@ fn main() -> Result<()> {
             "--no-var" => no_var = true,
             "--paper" => paper = true,
             "--no-bg" => no_bg = true,
+            "--no-split" => no_split = true,
             "--contrast" => csig = Some(args.next().context("--contrast K")?.parse()?),
             "--bg-r" => bg_r = Some(args.next().context("--bg-r N")?.parse()?),
             "--literal-var" => literal = true,
@@ -78,6 +80,9 @@ fn main() -> Result<()> {
         if no_bg {
             p.background = false;
         }
+        if no_split {
+            p.split_merged = false;
+        }
         if paper {
             // the paper's pipeline: no step beyond Section III
             (literal, scale1) = (true, true);
@@ -85,6 +90,7 @@ fn main() -> Result<()> {
             p.local_smooth = 1;
             p.background = false;
             p.contrast_sigmas = 0.0;
+            p.split_merged = false;
         }
         if let Some(r) = bg_r {
             p.background_radius = r;

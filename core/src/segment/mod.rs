@@ -56,6 +56,7 @@
 
 pub mod coarse;
 pub mod local;
+pub mod split;
 mod workspace;
 
 pub use workspace::{
@@ -160,6 +161,8 @@ pub struct SegmentStats {
     pub rejected_shape: u32,
     /// Components past [`MAX_ROI_COMPONENTS`] in one region (not examined).
     pub label_overflow: u32,
+    /// Extra objects made by splitting merged objects ([`split`]).
+    pub split: u32,
     /// Objects of the same fish found in overlapping regions (removed).
     pub duplicates: u32,
     /// Objects dropped by the `N`/`R` capacity of [`Objects`].
