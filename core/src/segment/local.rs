@@ -507,7 +507,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             level: b,
             part: c,
         };
-        super::split::split_merged(sv, roi, labels, n2, t_low, params, bufs, stats)
+        super::split::split_merged(sv, roi, (fw, fh), labels, n2, t_low, params, bufs, stats)
     } else {
         n2
     };

@@ -651,9 +651,16 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         // first part keeps its place, further parts follow all objects
         let comps = if p.split_merged {
             let t_fl = t_low.floor().clamp(0.0, 255.0) as u8;
+            let m = p.margin / 4;
+            let cut = |c: &[(u32, u32)]| {
+                c.iter().any(|&(x, y)| {
+                    let (fx, fy) = (x + x0, y + y0);
+                    fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
+                })
+            };
             let split: Vec<_> = comps
                 .iter()
-                .map(|c| super::split::split_object(c, &seen, t_fl, p))
+                .map(|c| super::split::split_object(c, &seen, t_fl, p, cut))
                 .collect();
             let mut firsts: Vec<_> = split.iter().map(|s| s[0].clone()).collect();
             firsts.extend(split.into_iter().flat_map(|s| s.into_iter().skip(1)));

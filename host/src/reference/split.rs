@@ -7,20 +7,22 @@
 //! `bw + bh` growth rounds per level).
 
 use super::segment::{components, pca};
-use fishtrack_core::segment::split::{SPLIT_LEVELS, SPLIT_STABLE};
+use fishtrack_core::segment::split::{SPLIT_KEEP, SPLIT_LEVELS, SPLIT_STABLE};
 use fishtrack_core::Params;
 use image::{GrayImage, Luma};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// Splits one object `comp` (ROI pixels, raster order) of a `rw × rh` ROI
 /// whose thresholded pixels are `seen`, `t_low` = ⌊τ_low⌋. Returns its
 /// parts (one part, `comp` itself, when it is not split), each in raster
-/// order; the first keeps the object's place.
+/// order; the first keeps the object's place. `cut(part)`: whether the
+/// frame border cuts a part.
 pub fn split_object(
     comp: &[(u32, u32)],
     seen: &GrayImage,
     t_low: u8,
     p: &Params,
+    cut: impl Fn(&[(u32, u32)]) -> bool,
 ) -> Vec<Vec<(u32, u32)>> {
     let whole = vec![comp.to_vec()];
     let v = |q: &(u32, u32)| seen.get_pixel(q.0, q.1).0[0];
@@ -32,6 +34,7 @@ pub fn split_object(
     let e = p.min_elongation as f64;
     let step = ((vmax - t_low) as u32).div_ceil(SPLIT_LEVELS).max(1);
     let mut run = 0;
+    let mut first: Vec<HashSet<(u32, u32)>> = Vec::new();
     let mut t = t_low as u32;
     let seeds = loop {
         t += step;
@@ -62,7 +65,22 @@ pub fn split_object(
             run = 0;
             continue;
         }
-        run += 1;
+        // stable: each part inside its own part of the run's first level,
+        // keeping SPLIT_KEEP of its area
+        let homes: Vec<Option<usize>> = parts
+            .iter()
+            .map(|c| first.iter().position(|f| f.contains(&c[0])))
+            .collect();
+        let distinct = homes.iter().flatten().collect::<HashSet<_>>().len() == parts.len();
+        let kept = parts.iter().zip(&homes).all(|(c, h)| {
+            h.is_some_and(|h| c.len() as f64 >= SPLIT_KEEP as f64 * first[h].len() as f64)
+        });
+        if run > 0 && distinct && kept {
+            run += 1;
+        } else {
+            run = 1;
+            first = parts.iter().map(|c| c.iter().copied().collect()).collect();
+        }
         if run >= SPLIT_STABLE {
             break parts;
         }
@@ -93,7 +111,17 @@ pub fn split_object(
         // (never reached pixels cannot occur; they would stay with part 1)
         out[owner.get(q).copied().unwrap_or(0)].push(*q);
     }
-    out
+    // every part must pass the final shape test (elongated, or cut by the
+    // frame border: `cut(part)`), else the object stays whole
+    let fish = |c: &Vec<(u32, u32)>| {
+        let (_, _, _, l1, l2) = pca(c);
+        c.len() >= p.area_min as usize && (e <= 1.0 || l1 >= e * e * l2 || cut(c))
+    };
+    if out.iter().all(fish) {
+        out
+    } else {
+        whole
+    }
 }
 
 /// Grows the owners into the open unowned pixels of `comp`, one
