@@ -15,7 +15,7 @@
 //!    final objects ([`local::elongated_enough`]).
 //!
 //!    Between the final labelling and the objects' statistics (beyond the
-//!    paper, `Params::split_merged`), [`split`] cuts objects that are two
+//!    paper, `Params::split_merged`, default off), [`split`] cuts objects that are two
 //!    touching fish where a higher threshold separates them into stable,
 //!    elongated parts.
 //!

@@ -539,7 +539,7 @@ mod tests {
         for y in 16..64 {
             for x in 30..330 {
                 let (g, yy) = if y < 40 { (g1, y - 16) } else { (g2, y - 40) };
-                let edge = yy < 4 || yy >= 20;
+                let edge = !(4..20).contains(&yy);
                 img[y * w + x] = if edge { g - seam } else { g };
                 mask[y * w + x] = 255;
             }
