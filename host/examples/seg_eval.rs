@@ -7,11 +7,13 @@
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
 //!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
-//!     [--alpha A] [--out DIR] HAUL...
+//!     [--alpha A] [--split | --no-split] [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
 //! gradient with one global threshold, literal θ_V, no elongation test, no
 //! local smoothing, no border exemption of the elongation test).
+//! `--split` / `--no-split` turn the split of merged objects
+//! (`Params::split_merged`, `fishtrack_core::segment::split`) on / off.
 //! ```
 
 use std::path::PathBuf;
@@ -28,6 +30,7 @@ fn main() -> Result<()> {
     let (mut var_min, mut elong): (Option<f32>, Option<f32>) = (None, None);
     let mut smooth: Option<u8> = None;
     let mut no_bg = false;
+    let mut split: Option<bool> = None;
     let mut bg_r: Option<u8> = None;
     let mut csig: Option<f32> = None;
     let mut out = std::env::temp_dir().join("seg_eval");
@@ -40,6 +43,8 @@ fn main() -> Result<()> {
             "--no-var" => no_var = true,
             "--paper" => paper = true,
             "--no-bg" => no_bg = true,
+            "--no-split" => split = Some(false),
+            "--split" => split = Some(true),
             "--contrast" => csig = Some(args.next().context("--contrast K")?.parse()?),
             "--bg-r" => bg_r = Some(args.next().context("--bg-r N")?.parse()?),
             "--literal-var" => literal = true,
@@ -78,6 +83,9 @@ fn main() -> Result<()> {
         if no_bg {
             p.background = false;
         }
+        if let Some(s) = split {
+            p.split_merged = s;
+        }
         if paper {
             // the paper's pipeline: no step beyond Section III
             (literal, scale1) = (true, true);
@@ -85,6 +93,7 @@ fn main() -> Result<()> {
             p.local_smooth = 1;
             p.background = false;
             p.contrast_sigmas = 0.0;
+            p.split_merged = false;
         }
         if let Some(r) = bg_r {
             p.background_radius = r;

@@ -112,9 +112,72 @@ fn ablations_agree_too() {
             min_elongation: 3.0,
             ..base
         },
+        Params {
+            split_merged: true,
+            ..base
+        },
     ] {
         let (agr, _) = compare_segmentation(&img, &p).unwrap();
         assert!(agr.passes(), "{p:?}: {agr:?}");
+    }
+}
+
+/// Two shaded fish lying flank to flank (bright backs, dim edges) on noisy
+/// water: one object without the split, two with it
+/// (`Params::split_merged`), each on its fish, and core and reference
+/// agree either way.
+#[test]
+fn touching_fish_split_agrees_with_reference() {
+    let (w, h) = (512u32, 512u32);
+    let mut s = 7u64;
+    let mut noise = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s % 7) as f32 - 3.0
+    };
+    // (cx, cy, a, b, peak above the water)
+    let fish = [
+        (250.0f32, 230.0f32, 130.0f32, 22.0f32, 90.0f32),
+        (262.0, 274.0, 120.0, 22.0, 60.0),
+    ];
+    let img = GrayImage::from_fn(w, h, |x, y| {
+        let mut v = 30.0f32;
+        for &(cx, cy, a, b, g) in &fish {
+            let (dx, dy) = ((x as f32 - cx) / a, (y as f32 - cy) / b);
+            let r2 = dx * dx + dy * dy;
+            if r2 <= 1.0 {
+                v = v.max(30.0 + 15.0 + g * (1.0 - r2));
+            }
+        }
+        image::Luma([(v + noise()).clamp(0.0, 255.0) as u8])
+    });
+    let base = Params::for_frame(512);
+    let (off, r_off) = compare_segmentation(&img, &base).unwrap();
+    assert!(off.passes(), "{off:?}");
+    assert_eq!(
+        r_off.objects.len(),
+        1,
+        "the two fish are one object without the split"
+    );
+    let p = Params {
+        split_merged: true,
+        ..base
+    };
+    let (on, r_on) = compare_segmentation(&img, &p).unwrap();
+    assert!(on.passes(), "{on:?}");
+    assert!(on.core_stats.split >= 1, "{:?}", on.core_stats);
+    assert_eq!(r_on.objects.len(), 2);
+    for &(cx, cy, a, ..) in &fish {
+        let hit = r_on.objects.iter().any(|o| {
+            let (ox, oy, ..) = o.obb;
+            ((ox - cx as f64).powi(2) + (oy - cy as f64).powi(2)).sqrt() < 0.15 * a as f64
+        });
+        assert!(
+            hit,
+            "fish at ({cx}, {cy}) not found: {:?}",
+            r_on.objects.iter().map(|o| o.obb).collect::<Vec<_>>()
+        );
     }
 }
 

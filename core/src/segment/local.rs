@@ -501,6 +501,16 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     // --- final components and their statistics ---
     let n2 = label_components(view(a, rw, rh)?, labels, |ar| ar >= amin && ar <= amax)
         .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    let n2 = if params.split_merged {
+        let bufs = super::split::SplitBufs {
+            lab8: a,
+            level: b,
+            part: c,
+        };
+        super::split::split_merged(sv, roi, (fw, fh), labels, n2, t_low, params, bufs, stats)
+    } else {
+        n2
+    };
     let n2s = (n2 as usize).min(cap);
     stats.label_overflow += n2 - n2s as u32;
     for rec in recs.iter_mut().take(n2s) {

@@ -14,8 +14,13 @@
 //!    opening (III.D), and (beyond the paper) an elongation test on the
 //!    final objects ([`local::elongated_enough`]).
 //!
+//!    Between the final labelling and the objects' statistics (beyond the
+//!    paper, `Params::split_merged`, default off), [`split`] cuts objects that are two
+//!    touching fish where a higher threshold separates them into stable,
+//!    elongated parts.
+//!
 //! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
-//! .. }` is the paper's Section III exactly.
+//! split_merged: false, .. }` is the paper's Section III exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
 //!
@@ -38,7 +43,9 @@
 //! 8 bytes per pixel of the largest region of interest. A region whose
 //! bounding box exceeds the ROI capacity is shrunk about its centre until it
 //! fits ([`SegmentStats::regions_shrunk`]). Stack use per call is a few KiB
-//! (five 256-entry `u32` histograms and a lookup table in the deepest frame).
+//! (five 256-entry `u32` histograms and a lookup table in the deepest frame;
+//! the split step, [`split`], adds one 16-byte box per object of a region,
+//! 4 KiB, and works in the region's own buffers: workspace size unchanged).
 //!
 //! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
 //! `workspace_size(2048, 2048, 1 << 20)` = 18 098 496 bytes (17.3 MiB):
@@ -56,6 +63,7 @@
 
 pub mod coarse;
 pub mod local;
+pub mod split;
 mod workspace;
 
 pub use workspace::{
@@ -160,6 +168,10 @@ pub struct SegmentStats {
     pub rejected_shape: u32,
     /// Components past [`MAX_ROI_COMPONENTS`] in one region (not examined).
     pub label_overflow: u32,
+    /// Extra objects made by splitting merged objects ([`split`]).
+    pub split: u32,
+    /// Splits found but not made: a grown part failed the shape test.
+    pub split_cancelled: u32,
     /// Objects of the same fish found in overlapping regions (removed).
     pub duplicates: u32,
     /// Objects dropped by the `N`/`R` capacity of [`Objects`].

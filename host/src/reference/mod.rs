@@ -6,5 +6,6 @@
 pub mod background;
 pub mod compare;
 pub mod segment;
+pub mod split;
 pub mod stereo;
 pub mod track;

@@ -211,7 +211,7 @@ fn pca_of(a: f64, b: f64, c: f64) -> (f64, f64, f64) {
 }
 
 /// PCA of a pixel set: centroid, angle, λ₁, λ₂ (population covariance).
-fn pca(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
+pub(super) fn pca(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
     let [mx, my, a, b, c] = centroid_cov(px);
     let (angle, l1, l2) = pca_of(a, b, c);
     (mx, my, angle, l1, l2)
@@ -219,7 +219,7 @@ fn pca(px: &[(u32, u32)]) -> (f64, f64, f64, f64, f64) {
 
 /// Components of the nonzero pixels of `mask`: pixel lists in raster order
 /// of first pixel.
-fn components(mask: &GrayImage) -> Vec<Vec<(u32, u32)>> {
+pub(super) fn components(mask: &GrayImage) -> Vec<Vec<(u32, u32)>> {
     let lab = connected_components(mask, Connectivity::Eight, Luma([0u8]));
     let mut by: HashMap<u32, usize> = HashMap::new();
     let mut out: Vec<Vec<(u32, u32)>> = Vec::new();
@@ -643,10 +643,32 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         }
         // Section III.D
         let post = open(&close(&kept, &disk), &disk);
-        for comp in components(&post) {
-            if comp.len() < amin || comp.len() > amax {
-                continue;
-            }
+        let comps: Vec<Vec<(u32, u32)>> = components(&post)
+            .into_iter()
+            .filter(|c| c.len() >= amin && c.len() <= amax)
+            .collect();
+        // split of merged objects (core: `segment::split`): each object's
+        // first part keeps its place, further parts follow all objects
+        let comps = if p.split_merged {
+            let t_fl = t_low.floor().clamp(0.0, 255.0) as u8;
+            let m = p.margin / 4;
+            let cut = |c: &[(u32, u32)]| {
+                c.iter().any(|&(x, y)| {
+                    let (fx, fy) = (x + x0, y + y0);
+                    fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
+                })
+            };
+            let split: Vec<_> = comps
+                .iter()
+                .map(|c| super::split::split_object(c, &seen, t_fl, p, cut))
+                .collect();
+            let mut firsts: Vec<_> = split.iter().map(|s| s[0].clone()).collect();
+            firsts.extend(split.into_iter().flat_map(|s| s.into_iter().skip(1)));
+            firsts
+        } else {
+            comps
+        };
+        for comp in comps {
             // elongation test (core: `local::elongated_enough`)
             let e = p.min_elongation as f64;
             let (_, _, _, l1, l2) = pca(&comp);
