@@ -1121,7 +1121,7 @@ mod bits {
     /// Packs the 0/255 rows of `img` into `out` (bit x of a row at word
     /// x / 64, bit x % 64); false when a byte is neither 0 nor 255.
     fn pack(img: &[u8], w: usize, lay: &Layout, out: &mut [u64]) -> bool {
-        out.fill(0);
+        crate::label::fill_stores(out, 0);
         for (yy, row) in img.chunks_exact(w).take(lay.h).enumerate() {
             // 0 → 0, 255 → 0, anything else → nonzero
             if row.iter().fold(0u8, |a, &p| a | (p.wrapping_add(1) >> 1)) != 0 {
@@ -1225,7 +1225,7 @@ mod bits {
                 *o = p | (m >> k) | (rt << (64 - k)) | (m << k) | (l >> (64 - k));
             }
         }
-        dst.fill(0);
+        crate::label::fill_stores(dst, 0);
         let (h, ns) = (lay.h as isize, lay.ns);
         for dy in -(r as isize)..=(r as isize) {
             let hw = disk.half_width(dy).min(r);
