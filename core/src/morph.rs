@@ -798,28 +798,7 @@ impl MeshGeom {
         let n16 = nb * (BLOCK / MESH_ALIGN);
         let ring: &[u128] = bytemuck::try_cast_slice(ring).ok()?;
         let identity: &[u128] = bytemuck::try_cast_slice(identity).ok()?;
-        let identity = identity.get(..n16)?;
-        // input i: column x0 + s·(i − half) of row y' = y − half + i, at
-        // byte pad − m + s·(i − half) + shear(y'), a multiple of 16
         let base = self.pad - m;
-        let mut srcs: [&[u128]; MAX_SE] = [&[]; MAX_SE];
-        // slot of row y − half + i: (y + half + 1 + i) mod k, stepped
-        let mut slot = (y + half + 1) % k;
-        for (i, sl) in srcs.iter_mut().take(k).enumerate() {
-            let yy = (y + i).wrapping_sub(half);
-            *sl = if yy < self.h {
-                let at = match dir {
-                    Diagonal::Main => base + i - half,
-                    Diagonal::Anti => base + half - i,
-                } + mesh_shear(yy, dir);
-                let s = (slot * l + at) / MESH_ALIGN;
-                ring.get(s..s + n16)?
-            } else {
-                identity
-            };
-            slot = if slot + 1 == k { 0 } else { slot + 1 };
-        }
-        let srcs = srcs.get(..k)?;
         // column x0 of row y: in the next ring's slot, sheared for its
         // reader; in the output row, byte 0
         let at = match next_dir {
@@ -827,11 +806,19 @@ impl MeshGeom {
             None => 0,
         };
         let out = next.get_mut(at..at + nb * BLOCK)?;
+        let src = MeshSrc {
+            ring,
+            identity,
+            y,
+            base,
+            n16,
+            dir,
+        };
         match k {
-            3 => reduce_aligned::<MAX, 3>(out, srcs)?,
-            5 => reduce_aligned::<MAX, 5>(out, srcs)?,
-            7 => reduce_aligned::<MAX, 7>(out, srcs)?,
-            _ => reduce_aligned_dyn::<MAX>(out, srcs)?,
+            3 => reduce_aligned::<MAX, 3>(out, &self.inputs::<3>(&src)?)?,
+            5 => reduce_aligned::<MAX, 5>(out, &self.inputs::<5>(&src)?)?,
+            7 => reduce_aligned::<MAX, 7>(out, &self.inputs::<7>(&src)?)?,
+            _ => reduce_aligned_dyn::<MAX>(out, &self.inputs::<{ MAX_SE }>(&src)?[..k])?,
         }
         if next_dir.is_some() {
             // an erosion's output is read by a dilation and vice versa
@@ -841,11 +828,55 @@ impl MeshGeom {
     }
 }
 
+/// What [`MeshGeom::inputs`] needs to find the inputs of one output row.
+struct MeshSrc<'a> {
+    ring: &'a [u128],
+    identity: &'a [u128],
+    y: usize,
+    /// `pad − m` (see [`MeshGeom::lead`]).
+    base: usize,
+    /// Words per input.
+    n16: usize,
+    dir: Diagonal,
+}
+
+impl MeshGeom {
+    /// The first `min(K, len)` inputs of output row `src.y` (rows
+    /// `y − half ..= y + half`, shifted along the diagonal; identity rows
+    /// outside the image), `n16` aligned words each; the rest empty.
+    #[inline(always)]
+    fn inputs<'a, const K: usize>(&self, src: &MeshSrc<'a>) -> Option<[&'a [u128]; K]> {
+        let (half, l) = (self.half, self.l);
+        let k = 2 * half + 1;
+        let identity = src.identity.get(..src.n16)?;
+        let mut srcs: [&[u128]; K] = [&[]; K];
+        // input i: column x0 + s·(i − half) of row y' = y − half + i, at
+        // byte pad − m + s·(i − half) + shear(y'), a multiple of 16; the
+        // slot of row y' is (y + half + 1 + i) mod k, stepped
+        let mut slot = (src.y + half + 1) % k;
+        for (i, sl) in srcs.iter_mut().take(k).enumerate() {
+            let yy = (src.y + i).wrapping_sub(half);
+            *sl = if yy < self.h {
+                let at = match src.dir {
+                    Diagonal::Main => src.base + i - half,
+                    Diagonal::Anti => src.base + half - i,
+                } + mesh_shear(yy, src.dir);
+                let s = (slot * l + at) / MESH_ALIGN;
+                src.ring.get(s..s + src.n16)?
+            } else {
+                identity
+            };
+            slot = if slot + 1 == k { 0 } else { slot + 1 };
+        }
+        Some(srcs)
+    }
+}
+
 /// `out` (32-byte blocks) = the op of the first `K` inputs (16-byte words,
 /// two per block), block-wise; `None` if there are fewer inputs or one is
 /// short.
 #[inline(never)]
-fn reduce_aligned<const MAX: bool, const K: usize>(out: &mut [u8], r: &[&[u128]]) -> Option<()> {
+fn reduce_aligned<const MAX: bool, const K: usize>(out: &mut [u8], r: &[&[u128]; K]) -> Option<()> {
     let ob: &mut [[u8; BLOCK]] = bytemuck::try_cast_slice_mut(out).ok()?;
     let n = ob.len();
     if K == 0 || r.len() < K {
