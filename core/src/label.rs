@@ -255,7 +255,7 @@ pub fn label_components(
             // background: skipped 16 pixels at a time, labels zeroed in one fill
             let z = next_where(row, x, w, true);
             if let Some(l) = labels.get_mut(y * w + x..y * w + z) {
-                l.fill(0);
+                fill_stores(l, 0);
             }
             x = z;
             if x >= w {
@@ -321,6 +321,20 @@ pub fn label_components(
         }
     }
     Ok(next)
+}
+
+/// `dst.fill(v)` as a loop of vector stores, never a `memset` call: the
+/// fills here are many and short (a background stretch of one label row),
+/// where the call costs more than the stores, and glibc's `rep stosb` path
+/// for longer ones is one instruction per byte to callgrind (issue 8's
+/// instruction counts). `v` passes through `black_box` so the compiler
+/// cannot see a byte splat and call `memset` after all.
+#[inline]
+pub(crate) fn fill_stores<T: Copy>(dst: &mut [T], v: T) {
+    let v = core::hint::black_box(v);
+    for d in dst {
+        *d = v;
+    }
 }
 
 /// The next run of nonzero bytes in `row[..w]` at or after `x`, or `None`

@@ -358,21 +358,32 @@ pub fn end_square_sad(
     };
     let (lx, ly) = (fl(cl.0)? - half, fl(cl.1)? - half);
     let (rx, ry) = (fl(cr.0)? - half, fl(cr.1)? - half);
+    // the columns i of the square inside both images, the same for every
+    // row: one slice pair per row (rows outside either image skipped)
+    let i0 = 0i64.max(-lx).max(-rx);
+    let i1 = side
+        .min(left.width() as i64 - lx)
+        .min(right.width() as i64 - rx);
     let mut sum = 0u64;
     let mut n = 0u64;
-    for j in 0..side {
-        for i in 0..side {
-            let (xa, ya, xb, yb) = (lx + i, ly + j, rx + i, ry + j);
-            if xa < 0 || ya < 0 || xb < 0 || yb < 0 {
+    if i1 > i0 {
+        let (a0, b0) = ((lx + i0) as usize, (rx + i0) as usize);
+        let len = (i1 - i0) as usize;
+        for j in 0..side {
+            let (ya, yb) = (ly + j, ry + j);
+            if ya < 0 || yb < 0 {
                 continue;
             }
-            if let (Some(a), Some(b)) = (
-                left.get(xa as usize, ya as usize),
-                right.get(xb as usize, yb as usize),
-            ) {
-                sum += a.abs_diff(b) as u64;
-                n += 1;
-            }
+            let (Some(a), Some(b)) = (
+                left.row(ya as usize).get(a0..a0 + len),
+                right.row(yb as usize).get(b0..b0 + len),
+            ) else {
+                continue;
+            };
+            // at most 1024 · 255 per row: u32
+            let s: u32 = a.iter().zip(b).map(|(&p, &q)| p.abs_diff(q) as u32).sum();
+            sum += s as u64;
+            n += len as u64;
         }
     }
     *ops += n;
@@ -887,6 +898,50 @@ mod tests {
         // rank 3 from each end along +y: rows 2 and 7 (centre 4.5)
         let (lo, hi) = axis_extent(&runs, 7.0, 4.5, 0.0, 1.0, 3).unwrap();
         assert_eq!((lo, hi), (-2.5, 2.5));
+    }
+
+    proptest::proptest! {
+        /// The row-sliced end-square SAD equals the pixel-by-pixel
+        /// definition (pixels outside either image skipped), squares
+        /// partly or wholly outside either image included.
+        #[test]
+        fn end_square_sad_matches_every_pixel(
+            (lw, lh, rw, rh) in (1usize..50, 1usize..40, 1usize..50, 1usize..40),
+            cl in (-30.0f32..80.0, -30.0f32..70.0),
+            cr in (-30.0f32..80.0, -30.0f32..70.0),
+            side in 0u32..40,
+            seed in proptest::prelude::any::<u64>(),
+        ) {
+            let mut st = seed | 1;
+            let mut px = || { st ^= st << 13; st ^= st >> 7; st ^= st << 17; (st >> 24) as u8 };
+            let limg: Vec<u8> = (0..lw * lh).map(|_| px()).collect();
+            let rimg: Vec<u8> = (0..rw * rh).map(|_| px()).collect();
+            let lv = ImageView::packed(&limg, lw, lh).unwrap();
+            let rv = ImageView::packed(&rimg, rw, rh).unwrap();
+            let mut ops = 0u64;
+            let got = end_square_sad(&lv, &rv, cl, cr, side, &mut ops);
+            // the definition, pixel by pixel
+            let sd = side.clamp(1, 1024) as i64;
+            let hf = sd / 2;
+            let rnd = |v: f32| micromath::F32(v).round().0 as i64;
+            let (lx, ly, rx, ry) = (rnd(cl.0) - hf, rnd(cl.1) - hf, rnd(cr.0) - hf, rnd(cr.1) - hf);
+            let (mut sum, mut n) = (0u64, 0u64);
+            for j in 0..sd {
+                for i in 0..sd {
+                    let (xa, ya, xb, yb) = (lx + i, ly + j, rx + i, ry + j);
+                    if xa < 0 || ya < 0 || xb < 0 || yb < 0 {
+                        continue;
+                    }
+                    if let (Some(a), Some(b)) = (lv.get(xa as usize, ya as usize), rv.get(xb as usize, yb as usize)) {
+                        sum += a.abs_diff(b) as u64;
+                        n += 1;
+                    }
+                }
+            }
+            let want = if n == 0 || 4 * n < (sd * sd) as u64 { None } else { Some(sum as f32 / n as f32) };
+            proptest::prop_assert_eq!(got, want);
+            proptest::prop_assert_eq!(ops, n);
+        }
     }
 
     proptest::proptest! {

@@ -130,6 +130,55 @@ fn block_sad<const S: usize>(
     Some(sum as f32 / n as f32)
 }
 
+/// Widest right-view window [`gather_window`] holds: the block side plus
+/// the disparity span (`8 + 33` for the default block and range).
+const WINDOW: usize = 64;
+
+/// The right-view rows of a gathered block's search (see [`gather_block`],
+/// whose inside test this relies on): columns `x0 − d_hi ..
+/// x0 − d_lo + S` of rows `y0 .. y0 + S`, so each disparity's block is a
+/// slice at offset `d_hi − d` of it, without a per-row image lookup;
+/// `None` when that is wider than [`WINDOW`].
+fn gather_window<const S: usize>(
+    right: &ImageView<'_>,
+    x0: u32,
+    y0: u32,
+    d_lo: i32,
+    d_hi: i32,
+) -> Option<[[u8; WINDOW]; S]> {
+    let span = usize::try_from(d_hi as i64 - d_lo as i64).ok()? + S;
+    let xs = usize::try_from(x0 as i64 - d_hi as i64).ok()?;
+    if span > WINDOW {
+        return None;
+    }
+    let mut b = [[0u8; WINDOW]; S];
+    for (j, row) in b.iter_mut().enumerate() {
+        let src = right.row(y0 as usize + j).get(xs..xs + span)?;
+        row.get_mut(..span)?.copy_from_slice(src);
+    }
+    Some(b)
+}
+
+/// [`block_sad`] on a gathered window ([`gather_window`]): the block at
+/// offset `off` of each window row (the same sum, so the same value).
+fn window_sad<const S: usize>(
+    lb: &[[u8; S]; S],
+    win: &[[u8; WINDOW]; S],
+    off: usize,
+    ops: &mut u64,
+) -> Option<f32> {
+    let mut sum = 0u32;
+    for (lrow, wrow) in lb.iter().zip(win) {
+        let rrow: &[u8; S] = wrow.get(off..off + S)?.try_into().ok()?;
+        for i in 0..S {
+            sum += lrow[i].abs_diff(rrow[i]) as u32;
+        }
+    }
+    let n = (S * S) as u64;
+    *ops += n;
+    Some(sum as f32 / n as f32)
+}
+
 /// SADs per pixel of one `bs × bs` block at `(bx0, y0)` for every
 /// disparity of `[d_lo, d_hi]`, in order, through `f(d, sad)`: the gathered
 /// fixed-size path for the common block sides when the search stays inside
@@ -150,6 +199,13 @@ fn block_sads(
         ($s:literal) => {
             if bs == $s {
                 if let Some(lb) = gather_block::<$s>(left, right, bx0, y0, d_lo, d_hi) {
+                    if let Some(win) = gather_window::<$s>(right, bx0, y0, d_lo, d_hi) {
+                        for d in d_lo..=d_hi {
+                            let off = (d_hi - d) as usize;
+                            f(d, window_sad::<$s>(&lb, &win, off, ops));
+                        }
+                        return;
+                    }
                     for d in d_lo..=d_hi {
                         f(d, block_sad::<$s>(&lb, right, bx0, y0, d, ops));
                     }
@@ -315,7 +371,7 @@ mod tests {
         fn block_sads_equal_sad_per_pixel(
             w in 8usize..90, h in 8usize..40, seed in proptest::prelude::any::<u32>(),
             bx0 in 0u32..90, y0 in 0u32..40, bs in proptest::sample::select(vec![2u32, 7, 8, 16]),
-            d_lo in -40i32..40, span in 0i32..33,
+            d_lo in -40i32..40, span in 0i32..60,
         ) {
             let img = |k: u32| -> Vec<u8> {
                 (0..w * h).map(|i| tex(i as i32, (seed ^ k) as i32)).collect()

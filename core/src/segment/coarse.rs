@@ -331,7 +331,7 @@ fn coarse_regions_low(
         .seeded
         .get_mut(..nl)
         .ok_or(SegmentError::WorkspaceTooSmall)?;
-    seeded.fill(0);
+    crate::label::fill_stores(seeded, 0);
     let labels = lb.labels.get(..nl).ok_or(SegmentError::WorkspaceTooSmall)?;
     // both loops only look at the mask's runs (a seed has g > t_high >
     // t_low), background skipped 16 pixels at a time

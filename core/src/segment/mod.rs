@@ -222,20 +222,34 @@ impl MaskRef<'_> {
         let label = self.label;
         let mut i = 0usize;
         while i < row.len() {
-            match row
-                .get(i..)
-                .and_then(|r| r.iter().position(|&l| l == label))
-            {
-                Some(k) => i += k,
-                None => break,
+            i = find_label(row, i, label, true);
+            if i >= row.len() {
+                break;
             }
             let start = i;
-            i += row
-                .get(i..)
-                .map_or(0, |r| r.iter().position(|&l| l != label).unwrap_or(r.len()));
+            i = find_label(row, i, label, false);
             f(base + start as u32, base + i as u32);
         }
     }
+}
+
+/// First index `≥ i` of `row` whose label equals `label` (`eq`) or differs
+/// from it (`!eq`); `row.len()` when there is none. Stretches without one
+/// are skipped 8 labels per test (a branch-free compare that vectorises).
+fn find_label(row: &[i32], mut i: usize, label: i32, eq: bool) -> usize {
+    while let Some(c) = row.get(i..i + 8) {
+        if c.iter().fold(false, |a, &l| a | ((l == label) == eq)) {
+            break;
+        }
+        i += 8;
+    }
+    while let Some(&l) = row.get(i) {
+        if (l == label) == eq {
+            return i;
+        }
+        i += 1;
+    }
+    row.len()
 }
 
 /// What happened in one region, for tracing and for `fishtrack compare`.
@@ -528,5 +542,28 @@ pub(crate) fn long_axis_first(b: OrientedBox) -> OrientedBox {
         half_h: b.half_w,
         angle,
         ..b
+    }
+}
+
+#[cfg(test)]
+mod find_label_tests {
+    use super::find_label;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The blocked search equals a plain position scan, from any start.
+        #[test]
+        fn find_label_equals_position(
+            row in proptest::collection::vec(0i32..3, 0..70),
+            i in 0usize..75,
+            label in 0i32..3,
+            eq in any::<bool>(),
+        ) {
+            let want = row
+                .get(i..)
+                .and_then(|r| r.iter().position(|&l| (l == label) == eq))
+                .map_or(row.len(), |k| i + k);
+            prop_assert_eq!(find_label(&row, i, label, eq), want);
+        }
     }
 }
