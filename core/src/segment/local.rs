@@ -298,9 +298,11 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     if let Some(g) = bg {
         let side = ((2 * params.background_radius as usize + 1) * BLOCK) as f32;
         if libm::sqrtf(3.0) * reg.b / params.ellipse_scale.max(1.0) < side {
-            // only the ellipse's pixels are ever read from `d`
+            // the thresholds read only the ellipse's pixels of `d`; the
+            // split of merged objects reads every object pixel, and closing
+            // can add a few outside the ellipse, so then whole rows
             for (j, (row, sp)) in d.chunks_exact_mut(rw).zip(spans.iter()).enumerate() {
-                let r = span(sp);
+                let r = if params.split_merged { 0..rw } else { span(sp) };
                 let x0 = roi.x as usize + r.start;
                 if let Some(part) = row.get_mut(r) {
                     g.subtract_row(roi.y as usize + j, x0, part);

@@ -8,7 +8,8 @@
 //! thresholds of eq. (1) saw). When at some level the object's pixels
 //! above it fall into at least two 8-connected components that each hold
 //! at least `area_min` pixels (θ_A^L, eq. (4)) and each are elongated
-//! ([`super::local::elongated_enough`]) or cut by the frame border, and
+//! ([`super::local::elongated_enough`]; no exemption for parts cut by the
+//! frame border: it split border pieces of one fish apart, README), and
 //! this holds for [`SPLIT_STABLE`] consecutive levels, the object is two
 //! (or more) fish: fish of different reflectivity separate at a level
 //! between their brightnesses, fish of equal brightness at the darker seam
@@ -66,8 +67,8 @@ pub(crate) struct SplitBufs<'a> {
 /// Splits the merged objects among the `n` labelled objects of `labels`
 /// (`rw × rh`, ROI `roi` of the frame; `sv` the pixels the
 /// thresholds saw). Parts keep the object's label or get new labels after
-/// `n`. Returns the new number of labels (never more than
-/// [`MAX_SPLIT_OBJECTS`] + 1).
+/// `n`. Returns the new number of labels (at most
+/// [`MAX_SPLIT_OBJECTS`]: labels are held as bytes).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn split_merged(
     sv: ImageView<'_>,
@@ -301,7 +302,7 @@ fn find_split(
             run = 0;
             continue;
         }
-        // the qualifying parts: elongated or cut by the frame border
+        // the qualifying parts: elongated (no border exemption)
         let mut mom = [Moments::EMPTY; MAX_PARTS];
         for (y, lrow) in sub.chunks_exact(bw).enumerate() {
             let fy = roi.y + o.bb.y0 + y as u32;
@@ -393,8 +394,10 @@ fn stable(
 /// Grows the seeds (`seeds` labels in `sub`, packed box) into part ids in
 /// `part` (packed box): level by level from `t_split` down to `t_low`,
 /// then over the whole object; each pixel joins the first part that
-/// reaches it. Pixels never reached (cannot happen: the object is
-/// connected) stay part 0, which keeps the object's label.
+/// reaches it. Pixels not reached within the propagation's bound of
+/// `bw + bh` rounds (only a winding object whose geodesic extent exceeds
+/// it) stay part 0, which keeps the object's label; the f64 reference
+/// does not model the bound.
 fn grow_parts(o: &Obj<'_>, sub: &[i32], part: &mut [u8], seeds: u8, t_split: u8, t_low: u8) {
     let (bw, bh) = (o.bb.w(), o.bb.h());
     let mb = bw * bh;

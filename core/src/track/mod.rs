@@ -69,8 +69,10 @@
 //! afterwards). So closes are carried out after every target has stepped,
 //! in birth order, and a closing track that has committed nothing and whose
 //! every observation lies on the path (committed or best uncommitted) of
-//! another live target, or of a recently closed track (the last [`RECENT`]
-//! observations of closed tracks, a ring), with at least as many
+//! another live target, or of a recently closed track (a ring of the last
+//! [`RECENT`] observations on closed tracks' uncommitted best paths: a
+//! track that may fold has committed nothing, so its observations all lie
+//! within the last D frames, the span of those paths), with at least as many
 //! observations, is the same fish counted twice: it closes as
 //! [`CloseReason::Duplicate`] and reports no frame (end to end, seed 6:
 //! two one-frame tracks folded, count error +18.2 → +12.1 %).
@@ -333,8 +335,9 @@ pub enum CloseReason {
     /// [`Tracker::finish`] was called.
     End,
     /// Its best path had joined another target's (the same observations in
-    /// the last two frames): a duplicate, dropped without committing its
-    /// uncommitted stages.
+    /// the last two frames), or, with [`TrackConfig::fold_shared`], every
+    /// observation on it lies on another at least as long track: a
+    /// duplicate, dropped without committing its uncommitted stages.
     Duplicate,
 }
 
@@ -690,8 +693,9 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         Ok(())
     }
 
-    /// Closes every live target (reason [`CloseReason::End`]), reporting the
-    /// rest of their paths. The tracker can then be reused for a new haul.
+    /// Closes every live target (reason [`CloseReason::End`], or
+    /// [`CloseReason::Duplicate`] when [`TrackConfig::fold_shared`] folds
+    /// it), reporting the rest of their paths. The tracker can then be reused for a new haul.
     pub fn finish<S: EventSink + ?Sized>(&mut self, sink: &mut S) {
         for t in self.targets.iter_mut() {
             if t.closing.is_none() && t.pending.is_none() {
@@ -727,12 +731,15 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 continue;
             }
             let ev = t.hits.min(u16::MAX as u32) as u16;
-            for st in t.path.iter() {
-                if let (Some(o), Some(slot)) = (st.obs, self.recent.get_mut(self.recent_next)) {
+            // the steps of the closed track's trellis (the last D frames):
+            // a track that may fold has committed nothing, so its steps all
+            // lie in that span; `t.path` would hold only the first H steps
+            for (frame, obs) in real_steps(&t.trellis) {
+                if let Some(slot) = self.recent.get_mut(self.recent_next) {
                     *slot = Recent {
                         track: t.id,
-                        frame: st.frame,
-                        obs: o,
+                        frame,
+                        obs,
                         evidence: ev,
                     };
                     self.recent_next = (self.recent_next + 1) % RECENT;

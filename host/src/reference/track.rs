@@ -808,13 +808,12 @@ fn resolve_closes(
         if !fold {
             continue;
         }
+        // the closed track's uncommitted best path, as the core's ring
         let t = &targets[i];
-        for &(f, o) in &t.path {
-            if let Some(o) = o {
-                let n = recent.slots.len();
-                recent.slots[recent.next] = Some((t.id, f, o, t.hits));
-                recent.next = (recent.next + 1) % n;
-            }
+        for (f, o) in real_steps(t) {
+            let n = recent.slots.len();
+            recent.slots[recent.next] = Some((t.id, f, o, t.hits));
+            recent.next = (recent.next + 1) % n;
         }
     }
 }
