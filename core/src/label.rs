@@ -352,7 +352,6 @@ pub(crate) fn next_run(row: &[u8], x: usize, w: usize) -> Option<core::ops::Rang
 pub(crate) fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
     let w = w.min(row.len());
     const ONES: u128 = u128::MAX / 255; // 0x0101…01
-                                        // the same test 64 pixels per step (four chunks, one branch), then 16
     let holds = |v: u128| {
         if nonzero {
             v != 0
@@ -360,6 +359,14 @@ pub(crate) fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> u
             v.wrapping_sub(ONES) & !v & (ONES << 7) != 0
         }
     };
+    // the same test on one chunk of 16, then (in a long stretch) 64 pixels
+    // per step (four chunks, one branch), then 16 per step
+    if let Some(c) = row.get(x..x + 16).filter(|_| x + 16 <= w) {
+        if holds(bytemuck::pod_read_unaligned(c)) {
+            return first_byte(row, x, w, nonzero);
+        }
+        x += 16;
+    }
     while x + 64 <= w {
         let Some(c) = row.get(x..x + 64) else { break };
         let mut any = false;
@@ -386,6 +393,12 @@ pub(crate) fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> u
         }
         x += 16;
     }
+    first_byte(row, x, w, nonzero)
+}
+
+/// [`next_where`]'s pixel-by-pixel end (`w ≤ row.len()`).
+#[inline]
+fn first_byte(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
     while x < w {
         let p = row.get(x).copied().unwrap_or(0);
         if (p != 0) == nonzero {
