@@ -352,6 +352,32 @@ pub(crate) fn next_run(row: &[u8], x: usize, w: usize) -> Option<core::ops::Rang
 pub(crate) fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
     let w = w.min(row.len());
     const ONES: u128 = u128::MAX / 255; // 0x0101…01
+    let holds = |v: u128| {
+        if nonzero {
+            v != 0
+        } else {
+            v.wrapping_sub(ONES) & !v & (ONES << 7) != 0
+        }
+    };
+    // the same test on one chunk of 16, then (in a long stretch) 64 pixels
+    // per step (four chunks, one branch), then 16 per step
+    if let Some(c) = row.get(x..x + 16).filter(|_| x + 16 <= w) {
+        if holds(bytemuck::pod_read_unaligned(c)) {
+            return first_byte(row, x, w, nonzero);
+        }
+        x += 16;
+    }
+    while x + 64 <= w {
+        let Some(c) = row.get(x..x + 64) else { break };
+        let mut any = false;
+        for q in c.chunks_exact(16) {
+            any |= holds(bytemuck::pod_read_unaligned(q));
+        }
+        if any {
+            break;
+        }
+        x += 64;
+    }
     while x + 16 <= w {
         let Some(c) = row.get(x..x + 16) else { break };
         let v: u128 = bytemuck::pod_read_unaligned(c);
@@ -367,6 +393,12 @@ pub(crate) fn next_where(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> u
         }
         x += 16;
     }
+    first_byte(row, x, w, nonzero)
+}
+
+/// [`next_where`]'s pixel-by-pixel end (`w ≤ row.len()`).
+#[inline]
+fn first_byte(row: &[u8], mut x: usize, w: usize, nonzero: bool) -> usize {
     while x < w {
         let p = row.get(x).copied().unwrap_or(0);
         if (p != 0) == nonzero {
@@ -902,6 +934,16 @@ mod tests {
     proptest! {
         // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
         #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
+        #[test]
+        fn next_where_is_the_first_match(len in 0usize..300, seed in any::<u64>(), density in 0u64..100, x in 0usize..320, w in 0usize..320, nonzero in any::<bool>()) {
+            let mut s = seed;
+            let row: Vec<u8> = (0..len).map(|_| { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); if (s >> 33) % 1000 < density { (s >> 56) as u8 | 1 } else { 0 } }).collect();
+            let lim = w.min(row.len());
+            // the plain scan: the first matching column in [x, lim), else lim
+            let want = (x..lim).find(|&i| (row[i] != 0) == nonzero).unwrap_or(lim);
+            prop_assert_eq!(next_where(&row, x, w, nonzero), want);
+        }
+
         #[test]
         fn label_components_equals_flood_fill(w in 1usize..100, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
             let mask = random_mask(w, h, seed, density);

@@ -45,6 +45,10 @@ pub const BLOCKS: usize = 4;
 /// Cost given to implausible pairs in the assignment (never selected as a pair).
 const NO_PAIR: f32 = 1.0e6;
 
+/// Plausible candidate matches [`pair_objects`] keeps for the chosen pairs
+/// (on the stack; beyond it they are recomputed).
+const KEPT_MATCHES: usize = 32;
+
 /// Plausibility gate of a left/right candidate pair.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -150,6 +154,86 @@ pub const fn dense_sad_ops(width: u64, height: u64, num_disparities: u64) -> u64
     width * height * num_disparities
 }
 
+/// `(sum, compared pixels, pixels of the clipped area)` of [`sad_sum`].
+type RawSad = (u64, u64, u64);
+
+/// Raw SAD over left pixels `[x0, x1) × [y0, y1)` against the right image
+/// shifted by `−d`: `(sum, compared pixels, pixels of the clipped area)`.
+/// Columns whose right counterpart lies outside the right image are
+/// skipped. Sums over column ranges that tile a range add up exactly, so
+/// [`match_boxes`] builds whole-box SADs from its block SADs.
+#[allow(clippy::too_many_arguments)]
+fn sad_sum(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+    d: i32,
+) -> RawSad {
+    let w = right.width() as i64;
+    let x1 = x1.min(left.width() as u32);
+    let y1 = y1.min(left.height() as u32).min(right.height() as u32);
+    if x1 <= x0 || y1 <= y0 {
+        return (0, 0, 0);
+    }
+    // columns whose right counterpart lies inside the right image
+    let lo = (x0 as i64).max(d as i64);
+    let hi = (x1 as i64).min(w + d as i64);
+    let total = (x1 - x0) as u64 * (y1 - y0) as u64;
+    if hi <= lo {
+        return (0, 0, total);
+    }
+    let (lo, hi) = (lo as usize, hi as usize);
+    let (rlo, rhi) = (
+        (lo as i64 - d as i64) as usize,
+        (hi as i64 - d as i64) as usize,
+    );
+    let mut sum: u64 = 0;
+    let mut n: u64 = 0;
+    for y in y0 as usize..y1 as usize {
+        let (Some(a), Some(b)) = (left.row(y).get(lo..hi), right.row(y).get(rlo..rhi)) else {
+            continue;
+        };
+        sum += row_sad(a, b) as u64;
+        n += a.len() as u64;
+    }
+    (sum, n, total)
+}
+
+/// `Σ |a[i] − b[i]|` over the common length: 32-byte chunks summed in u16
+/// lanes (at most 32 × 255 each, no overflow), which vectorises to packed
+/// absolute differences, then the tail.
+fn row_sad(a: &[u8], b: &[u8]) -> u32 {
+    const C: usize = 32;
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut total: u32 = 0;
+    let (ac, bc) = (a.chunks_exact(C), b.chunks_exact(C));
+    let (at, bt) = (ac.remainder(), bc.remainder());
+    for (ca, cb) in ac.zip(bc) {
+        let mut lanes = [0u16; C];
+        for ((l, &p), &q) in lanes.iter_mut().zip(ca).zip(cb) {
+            *l = p.abs_diff(q) as u16;
+        }
+        total += lanes.iter().map(|&l| l as u32).sum::<u32>();
+    }
+    for (&p, &q) in at.iter().zip(bt) {
+        total += p.abs_diff(q) as u32;
+    }
+    total
+}
+
+/// Per-pixel SAD from [`sad_sum`]'s figures; `None` when fewer than half of
+/// the pixels could be compared.
+fn per_pixel((sum, n, total): RawSad) -> Option<f32> {
+    if n == 0 || 2 * n < total {
+        return None;
+    }
+    Some(sum as f32 / n as f32)
+}
+
 /// SAD per pixel between left pixels `[x0, x1) × [y0, y1)` and the right
 /// image shifted by `−d` (right column = left column − d). Pixels whose right
 /// column falls outside the image are skipped; `None` when fewer than half of
@@ -165,42 +249,9 @@ pub fn sad_per_pixel(
     d: i32,
     ops: &mut u64,
 ) -> Option<f32> {
-    let w = right.width() as i64;
-    let x1 = x1.min(left.width() as u32);
-    let y1 = y1.min(left.height() as u32).min(right.height() as u32);
-    if x1 <= x0 || y1 <= y0 {
-        return None;
-    }
-    // columns whose right counterpart lies inside the right image
-    let lo = (x0 as i64).max(d as i64);
-    let hi = (x1 as i64).min(w + d as i64);
-    let total = (x1 - x0) as u64 * (y1 - y0) as u64;
-    if hi <= lo {
-        return None;
-    }
-    let (lo, hi) = (lo as usize, hi as usize);
-    let (rlo, rhi) = (
-        (lo as i64 - d as i64) as usize,
-        (hi as i64 - d as i64) as usize,
-    );
-    let mut sum: u64 = 0;
-    let mut n: u64 = 0;
-    for y in y0 as usize..y1 as usize {
-        let (Some(a), Some(b)) = (left.row(y).get(lo..hi), right.row(y).get(rlo..rhi)) else {
-            continue;
-        };
-        let mut s: u32 = 0;
-        for (p, q) in a.iter().zip(b) {
-            s += p.abs_diff(*q) as u32;
-        }
-        sum += s as u64;
-        n += a.len() as u64;
-    }
-    *ops += n;
-    if n == 0 || 2 * n < total {
-        return None;
-    }
-    Some(sum as f32 / n as f32)
+    let r = sad_sum(left, right, x0, x1, y0, y1, d);
+    *ops += r.1;
+    per_pixel(r)
 }
 
 /// Result of matching one left box against one right box.
@@ -275,11 +326,14 @@ pub fn match_boxes(
     let rblocks = object_height_blocks(rb);
     let mut mins = [f32::INFINITY; BLOCKS];
     let mut disp = [0.0f32; BLOCKS];
-    for (k, l) in lblocks.iter().enumerate() {
+    // raw block sums by (left block, right block), reused for the whole-box
+    // SADs below (the blocks tile the box, so sums add up exactly)
+    let mut memo: [[Option<(i32, RawSad)>; BLOCKS]; BLOCKS] = [[None; BLOCKS]; BLOCKS];
+    for ((k, l), memo_k) in lblocks.iter().enumerate().zip(memo.iter_mut()) {
         if l.w == 0 {
             continue;
         }
-        for r in rblocks.iter() {
+        for (r, slot) in rblocks.iter().zip(memo_k.iter_mut()) {
             if r.w == 0 {
                 continue;
             }
@@ -287,10 +341,15 @@ pub fn match_boxes(
             if (d as f32) < d_lo || (d as f32) > d_hi {
                 continue;
             }
-            if let Some(s) = sad_per_pixel(left, right, l.x, l.right(), y0, y1, d, ops) {
-                if s < mins[k] {
-                    mins[k] = s;
-                    disp[k] = d as f32;
+            let raw = sad_sum(left, right, l.x, l.right(), y0, y1, d);
+            *ops += raw.1;
+            *slot = Some((d, raw));
+            if let Some(s) = per_pixel(raw) {
+                if let Some((m, dk)) = mins.get_mut(k).zip(disp.get_mut(k)) {
+                    if s < *m {
+                        *m = s;
+                        *dk = d as f32;
+                    }
                 }
             }
         }
@@ -326,12 +385,51 @@ pub fn match_boxes(
         lb.x as f32 - rb.x as f32,
         lb.right() as f32 - rb.right() as f32,
     ];
+    // whole-box SAD at disparity `d`: the blocks' memoised sums, the
+    // missing ones computed (each distinct `d` once)
+    let mut whole = |d: i32| -> Option<f32> {
+        let mut acc = (0u64, 0u64);
+        for (l, memo_k) in lblocks.iter().zip(memo.iter()) {
+            if l.w == 0 {
+                continue;
+            }
+            let raw = match memo_k.iter().flatten().find(|(dm, _)| *dm == d) {
+                Some((_, raw)) => *raw,
+                None => {
+                    let raw = sad_sum(left, right, l.x, l.right(), y0, y1, d);
+                    *ops += raw.1;
+                    raw
+                }
+            };
+            acc = (acc.0 + raw.0, acc.1 + raw.1);
+        }
+        let x1 = lb.right().min(left.width() as u32);
+        let y1c = y1.min(left.height() as u32).min(right.height() as u32);
+        let total = if x1 <= lb.x || y1c <= y0 {
+            0
+        } else {
+            (x1 - lb.x) as u64 * (y1c - y0) as u64
+        };
+        per_pixel((acc.0, acc.1, total))
+    };
+    let mut seen: [Option<(i32, Option<f32>)>; 6] = [None; 6];
     let mut best = (f32::INFINITY, dmean);
-    for c in cands {
+    for (c, seen_slot) in cands.into_iter().zip(0..) {
         if c < d_lo || c > d_hi {
             continue;
         }
-        if let Some(s) = sad_per_pixel(left, right, lb.x, lb.right(), y0, y1, c as i32, ops) {
+        let d = c as i32;
+        let s = match seen.iter().flatten().find(|(sd, _)| *sd == d) {
+            Some((_, s)) => *s,
+            None => {
+                let s = whole(d);
+                if let Some(slot) = seen.get_mut(seen_slot) {
+                    *slot = Some((d, s));
+                }
+                s
+            }
+        };
+        if let Some(s) = s {
             if s < best.0 {
                 best = (s, c);
             }
@@ -382,6 +480,7 @@ pub fn pair_objects<const N: usize, const R: usize>(
     let nr = right.items.len().min(N);
     let mut out = StereoPairs::<N>::default();
     let mut cost = [[NO_PAIR; N]; N];
+    let mut kept: heapless::Vec<(u16, u16, BlockMatch), KEPT_MATCHES> = heapless::Vec::new();
     for (i, lo) in left.items.iter().enumerate().take(nl) {
         for (j, ro) in right.items.iter().enumerate().take(nr) {
             let (lb, rb) = (lo.bbox, ro.bbox);
@@ -409,12 +508,15 @@ pub fn pair_objects<const N: usize, const R: usize>(
                     if let Some(c) = cost.get_mut(i).and_then(|row| row.get_mut(j)) {
                         *c = m.mu_sad;
                     }
+                    // kept while there is room; the rest are recomputed
+                    let _ = kept.push((i as u16, j as u16, m));
                 }
                 _ => out.stats.rejected += 1,
             }
         }
     }
-    // the few chosen matches are recomputed rather than stored (N² of them)
+    // the chosen matches come from `kept`, or are recomputed when it was
+    // full (N² of them would not fit; `match_boxes` is deterministic)
     let rematch = |i: usize, j: usize| -> Option<BlockMatch> {
         let plausible = cost
             .get(i)
@@ -424,6 +526,12 @@ pub fn pair_objects<const N: usize, const R: usize>(
         let mut scratch = 0u64;
         if !plausible {
             return None;
+        }
+        if let Some((_, _, m)) = kept
+            .iter()
+            .find(|(ki, kj, _)| *ki as usize == i && *kj as usize == j)
+        {
+            return Some(*m);
         }
         match_boxes(
             left_img,
@@ -608,6 +716,138 @@ pub fn solve_assignment<const N: usize>(cost: &[[f32; N]; N], n: usize, col4row:
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
+
+    /// The straightforward per-pixel SAD (the pre-session-6 code).
+    fn naive_sad(
+        left: &ImageView<'_>,
+        right: &ImageView<'_>,
+        x0: u32,
+        x1: u32,
+        y0: u32,
+        y1: u32,
+        d: i32,
+    ) -> Option<f32> {
+        let w = right.width() as i64;
+        let x1 = x1.min(left.width() as u32);
+        let y1 = y1.min(left.height() as u32).min(right.height() as u32);
+        let (mut sum, mut n, mut total) = (0u64, 0u64, 0u64);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                total += 1;
+                let rx = x as i64 - d as i64;
+                if rx >= 0 && rx < w {
+                    sum += left.row(y as usize)[x as usize]
+                        .abs_diff(right.row(y as usize)[rx as usize])
+                        as u64;
+                    n += 1;
+                }
+            }
+        }
+        if n == 0 || 2 * n < total {
+            return None;
+        }
+        Some(sum as f32 / n as f32)
+    }
+
+    /// [`match_boxes`] written plainly: every block pair and every
+    /// whole-box candidate computed from scratch.
+    fn naive_match(
+        left: &ImageView<'_>,
+        right: &ImageView<'_>,
+        lb: Roi,
+        rb: Roi,
+        d_lo: f32,
+        d_hi: f32,
+    ) -> Option<BlockMatch> {
+        let y0 = lb.y.max(rb.y);
+        let y1 = lb.bottom().min(rb.bottom());
+        if y1 <= y0 {
+            return None;
+        }
+        let (lbl, rbl) = (object_height_blocks(lb), object_height_blocks(rb));
+        let mut mins = [f32::INFINITY; BLOCKS];
+        let mut disp = [0.0f32; BLOCKS];
+        for k in 0..BLOCKS {
+            let l = lbl[k];
+            for r in rbl.iter() {
+                let d = l.x as i32 - r.x as i32;
+                if l.w == 0 || r.w == 0 || (d as f32) < d_lo || (d as f32) > d_hi {
+                    continue;
+                }
+                if let Some(s) = naive_sad(left, right, l.x, l.right(), y0, y1, d) {
+                    if s < mins[k] {
+                        mins[k] = s;
+                        disp[k] = d as f32;
+                    }
+                }
+            }
+        }
+        let found: Vec<usize> = (0..BLOCKS).filter(|&k| mins[k].is_finite()).collect();
+        if found.is_empty() {
+            return None;
+        }
+        let sum: f32 = found.iter().map(|&k| mins[k]).sum();
+        let dmean = found.iter().map(|&k| disp[k]).sum::<f32>() / found.len() as f32;
+        for k in 0..BLOCKS {
+            if !mins[k].is_finite() {
+                disp[k] = dmean;
+            }
+        }
+        let cands = [
+            disp[0],
+            disp[1],
+            disp[2],
+            disp[3],
+            lb.x as f32 - rb.x as f32,
+            lb.right() as f32 - rb.right() as f32,
+        ];
+        let mut best = (f32::INFINITY, dmean);
+        for c in cands {
+            if c < d_lo || c > d_hi {
+                continue;
+            }
+            if let Some(s) = naive_sad(left, right, lb.x, lb.right(), y0, y1, c as i32) {
+                if s < best.0 {
+                    best = (s, c);
+                }
+            }
+        }
+        Some(BlockMatch {
+            mu_sad: sum / found.len() as f32,
+            block_disparity: disp,
+            d_o: best.1,
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
+        #[test]
+        fn row_sad_is_the_plain_sum(a in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..200), seed in proptest::prelude::any::<u64>()) {
+            let b: Vec<u8> = a.iter().enumerate().map(|(i, &v)| v ^ ((seed >> (i % 57)) as u8)).collect();
+            let want: u32 = a.iter().zip(&b).map(|(p, q)| p.abs_diff(*q) as u32).sum();
+            proptest::prop_assert_eq!(row_sad(&a, &b), want);
+            proptest::prop_assert_eq!(row_sad(&a, &b[..b.len() / 2]), a.iter().zip(&b[..b.len() / 2]).map(|(p, q)| p.abs_diff(*q) as u32).sum::<u32>());
+        }
+
+        #[test]
+        fn match_boxes_equals_the_plain_version(
+            w in 8usize..90, h in 4usize..30, seed in proptest::prelude::any::<u64>(),
+            lx in 0u32..100, lw in 1u32..60, rx in 0u32..100, rw in 1u32..60,
+            ly in 0u32..30, lh in 1u32..30, ry in 0u32..30, rh in 1u32..30,
+            d_lo in -40.0f32..20.0, span in 0.0f32..80.0, smooth in proptest::prelude::any::<bool>(),
+        ) {
+            let mut s = seed;
+            let mut next = || { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 };
+            let img: Vec<u8> = (0..w * h).map(|i| if smooth { (i % w) as u8 / 4 + next() % 8 } else { next() }).collect();
+            let img2: Vec<u8> = (0..w * h).map(|i| if smooth { (i % w) as u8 / 3 + next() % 8 } else { next() }).collect();
+            let (lv, rv) = (ImageView::packed(&img, w, h).unwrap(), ImageView::packed(&img2, w, h).unwrap());
+            let (lb, rb) = (Roi::new(lx, ly, lw, lh), Roi::new(rx, ry, rw, rh));
+            let mut ops = 0u64;
+            let got = match_boxes(&lv, &rv, lb, rb, d_lo, d_lo + span, &mut ops);
+            let want = naive_match(&lv, &rv, lb, rb, d_lo, d_lo + span);
+            proptest::prop_assert_eq!(got, want);
+        }
+    }
 
     #[test]
     fn blocks_tile_the_box() {
