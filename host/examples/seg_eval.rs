@@ -7,7 +7,7 @@
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
 //!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
-//!     [--alpha A] [--split | --no-split] [--out DIR] HAUL...
+//!     [--alpha A|auto] [--split | --no-split] [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
 //! gradient with one global threshold, literal θ_V, no elongation test, no
@@ -19,8 +19,9 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use fishtrack::detect::detect_haul_alpha;
+use fishtrack::detect::detect_haul_scaling;
 use fishtrack::eval::evaluate;
+use fishtrack::rectify::Scaling;
 use fishtrack_core::params::Params;
 
 fn main() -> Result<()> {
@@ -35,7 +36,7 @@ fn main() -> Result<()> {
     let mut csig: Option<f32> = None;
     let mut out = std::env::temp_dir().join("seg_eval");
     let mut hauls = Vec::new();
-    let mut alpha = fishtrack::rectify::DEFAULT_ALPHA;
+    let mut alpha = Scaling::default();
     while let Some(a) = args.next() {
         match a.as_str() {
             "--single" => single = true,
@@ -54,8 +55,7 @@ fn main() -> Result<()> {
             "--elong" => elong = Some(args.next().context("--elong X")?.parse()?),
             "--bins" => bins = Some(args.next().context("--bins N")?.parse::<u8>()?),
             "--alpha" => {
-                alpha =
-                    fishtrack::track_cmd::check_alpha(args.next().context("--alpha A")?.parse()?)?
+                alpha = fishtrack::track_cmd::parse_scaling(&args.next().context("--alpha A")?)?
             }
             "--out" => out = PathBuf::from(args.next().context("--out DIR")?),
             s if s.starts_with("--") => bail!("unknown option {s}"),
@@ -115,7 +115,7 @@ fn main() -> Result<()> {
             .file_name()
             .map_or("haul".into(), |n| n.to_string_lossy().into_owned());
         let od = out.join(&name);
-        let sum = detect_haul_alpha(haul, &p, alpha, &od)?;
+        let sum = detect_haul_scaling(haul, &p, alpha, &od)?;
         let rep = evaluate(haul, &od)?;
         let seg = rep.segmentation.context("no segmentation score")?;
         let d = &seg.detection;

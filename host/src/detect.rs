@@ -23,7 +23,7 @@ use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI
 use crate::calib::StereoCalib;
 use crate::haul::Haul;
 use crate::output::{write_detections, DetectionRow};
-use crate::rectify::{in_raw_view, FixedMap, RectifiedCamera, Rectifier};
+use crate::rectify::{in_raw_view, FixedMap, RectifiedCamera, Rectifier, Scaling};
 
 /// Object capacity per frame (issue 4's recommended `Objects<64, 16384>`).
 pub const MAX_OBJECTS: usize = 64;
@@ -81,21 +81,21 @@ pub fn detection_rows<const N: usize, const R: usize>(
 /// Segments every left frame of `haul_dir` with `params` (already scaled to
 /// the frame size) and writes `out_dir/detections.csv`.
 pub fn detect_haul(haul_dir: &Path, params: &Params, out_dir: &Path) -> Result<DetectSummary> {
-    detect_haul_alpha(haul_dir, params, crate::rectify::DEFAULT_ALPHA, out_dir)
+    detect_haul_scaling(haul_dir, params, Scaling::default(), out_dir)
 }
 
-/// [`detect_haul`] with the rectification's free scaling `alpha`
-/// ([`Rectifier::with_alpha`]).
-pub fn detect_haul_alpha(
+/// [`detect_haul`] with the rectification's free scaling `scaling`
+/// ([`Rectifier::with_scaling`]).
+pub fn detect_haul_scaling(
     haul_dir: &Path,
     params: &Params,
-    alpha: f64,
+    scaling: Scaling,
     out_dir: &Path,
 ) -> Result<DetectSummary> {
     let haul = Haul::open(haul_dir)?;
     let calib = load_calibration(&haul)?;
     let (w, h) = (calib.width as usize, calib.height as usize);
-    let rect = Rectifier::with_alpha(&calib, alpha);
+    let rect = Rectifier::with_scaling(&calib, scaling);
     let left_map: &FixedMap = &rect.left_map;
     let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
     let mut objs: Box<Objects<MAX_OBJECTS, MAX_RUNS>> = Box::default();

@@ -66,11 +66,12 @@ enum Command {
         /// Data association: viterbi, mc or nn (default: the parameters', viterbi).
         #[arg(long)]
         tracker: Option<String>,
-        /// Rectification free scaling (OpenCV stereoRectify alpha): 0 keeps
-        /// only valid pixels, 1 keeps the whole raw views, -1 is OpenCV's
-        /// default scaling (default: fishtrack::rectify::DEFAULT_ALPHA).
-        #[arg(long, allow_negative_numbers = true)]
-        rect_alpha: Option<f64>,
+        /// Rectification free scaling (OpenCV stereoRectify alpha; default
+        /// 0.25): 0 keeps only valid pixels, 1 keeps the whole raw views,
+        /// -1 is OpenCV's default scaling, `auto` is 0.25 unless that
+        /// magnifies the raw views, then the least scale that does not.
+        #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
+        rect_alpha: Option<fishtrack::rectify::Scaling>,
     },
     /// Score a tracker output directory against HAUL/truth.json.
     Eval {
@@ -110,6 +111,11 @@ enum Command {
         #[arg(long, default_value_t = 25)]
         frames: u32,
     },
+}
+
+/// `--rect-alpha auto|A` ([`fishtrack::track_cmd::parse_scaling`]).
+fn parse_rect_alpha(s: &str) -> Result<fishtrack::rectify::Scaling, String> {
+    fishtrack::track_cmd::parse_scaling(s).map_err(|e| e.to_string())
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {

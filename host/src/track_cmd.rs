@@ -43,7 +43,7 @@ use crate::output::{
     write_detections, write_fish, write_json, write_stereo, write_tracks, write_viame,
     DetectionRow, FishOut, StereoRow, TrackRow,
 };
-use crate::rectify::{in_raw_view, RectifiedCamera, Rectifier};
+use crate::rectify::{in_raw_view, RectifiedCamera, Rectifier, Scaling};
 
 /// Frames per second of Cam-trawl video (VIAME metadata).
 pub const FPS: f64 = 5.0;
@@ -57,9 +57,9 @@ pub struct TrackOptions {
     pub tracker: Option<String>,
     /// `--overlays`.
     pub overlays: bool,
-    /// `--rect-alpha A`: the rectification's free scaling
-    /// ([`crate::rectify::DEFAULT_ALPHA`] when absent).
-    pub rect_alpha: Option<f64>,
+    /// `--rect-alpha auto|A`: the rectification's free scaling
+    /// ([`Scaling::default`] when absent).
+    pub rect_alpha: Option<Scaling>,
 }
 
 /// A haul made ready for the pipeline.
@@ -91,8 +91,24 @@ pub fn parse_tracker(s: &str) -> Result<Association, InputError> {
     }
 }
 
-/// Checks `--rect-alpha`: OpenCV's free scaling is in `[0, 1]`, or negative
-/// for its default scaling (taken as −1).
+/// Checks `--rect-alpha`: `auto` ([`Scaling::NoMagnification`]) or
+/// OpenCV's free scaling in `[0, 1]`, or
+/// negative for its default scaling (taken as −1).
+pub fn parse_scaling(s: &str) -> Result<Scaling, InputError> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(Scaling::NoMagnification);
+    }
+    let a: f64 = s.trim().parse().map_err(|_| {
+        InputError::plain(
+            "--rect-alpha",
+            format!("`{s}` is neither `auto` nor a number"),
+        )
+    })?;
+    check_alpha(a).map(Scaling::Alpha)
+}
+
+/// Checks a numeric `--rect-alpha`: OpenCV's free scaling is in `[0, 1]`,
+/// or negative for its default scaling (taken as −1).
 pub fn check_alpha(a: f64) -> Result<f64, InputError> {
     if a.is_finite() && a <= 1.0 {
         Ok(if a < 0.0 { -1.0 } else { a })
@@ -114,6 +130,17 @@ mod alpha_tests {
             let e = super::check_alpha(bad).unwrap_err().to_string();
             assert!(e.contains("--rect-alpha"), "{e}");
         }
+        use crate::rectify::Scaling;
+        assert_eq!(
+            super::parse_scaling("auto").unwrap(),
+            Scaling::NoMagnification
+        );
+        assert_eq!(super::parse_scaling(" 0.5").unwrap(), Scaling::Alpha(0.5));
+        assert_eq!(super::parse_scaling("-2").unwrap(), Scaling::Alpha(-1.0));
+        for bad in ["1.5", "fast", ""] {
+            let e = super::parse_scaling(bad).unwrap_err().to_string();
+            assert!(e.contains("--rect-alpha"), "{e}");
+        }
     }
 }
 
@@ -132,10 +159,7 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     })?;
     haul.calibration()?;
     let calib = StereoCalib::load(&haul.dir, Some(size))?;
-    let rectifier = Rectifier::with_alpha(
-        &calib,
-        check_alpha(opts.rect_alpha.unwrap_or(crate::rectify::DEFAULT_ALPHA))?,
-    );
+    let rectifier = Rectifier::with_scaling(&calib, opts.rect_alpha.unwrap_or_default());
     if rectifier.rect.vertical {
         return Err(InputError::file(
             &haul.dir,
@@ -177,6 +201,8 @@ impl Setup {
     pub fn pipeline_config(&self) -> PipelineConfig {
         let mut cfg = PipelineConfig::new(self.params, self.geometry, self.width, self.height);
         cfg.valid = self.rectifier.valid_rois();
+        // the tracker's frame border is the raw view's (TrackConfig::view)
+        cfg.track.view = cfg.valid;
         cfg
     }
 

@@ -50,7 +50,7 @@ fn success(hauls: &[TruthObs], assoc: Assoc, cues: Cues) -> (u64, u64) {
 /// [cap share σ_a σ_m σ_h σ_d lost_gate swap_passes area_robust hist_robust]"
 /// (defaults: `24 48 250 350 32 2 1 inf 24 0.25 0.5 1 0.04 6 4 inf inf`);
 /// FISHTRACK_RULES="fold=0 …" switches the round-5 rules
-/// (`fold_shared`).
+/// (`fold_shared`) and sets `depth_robust=C` (session 7).
 fn tweak(cfg: &mut TrackConfig) {
     if let Ok(v) = std::env::var("FISHTRACK_RULES") {
         for kv in v.split_whitespace() {
@@ -58,6 +58,7 @@ fn tweak(cfg: &mut TrackConfig) {
             let on = x != "0";
             match k {
                 "fold" => cfg.fold_shared = on,
+                "depth_robust" => cfg.depth_robust = x.parse().unwrap(),
                 _ => panic!("FISHTRACK_RULES: unknown rule {k}"),
             }
         }

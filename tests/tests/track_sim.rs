@@ -614,6 +614,39 @@ fn robust_appearance_core_and_reference_agree() {
     }
 }
 
+/// A raw view narrower than the frame (`TrackConfig::view`, the fill of a
+/// free scaling alpha > 0 around it) and the soft bound on the depth term
+/// (`depth_robust`, off by default) change assignments identically in core
+/// and reference, for all three association methods.
+#[test]
+fn raw_view_border_and_robust_depth_core_and_reference_agree() {
+    let mut cfg = TrackConfig::for_frame(W, W);
+    cfg.view = [
+        Roi::new(180, 120, W - 300, W - 200),
+        Roi::new(40, 120, W - 300, W - 200),
+    ];
+    cfg.depth_robust = 4.0;
+    let mut differ_from_default = 0usize;
+    for seed in 0..4 {
+        let h = simulate(seed, 80);
+        for a in [Assoc::Viterbi, Assoc::Mc, Assoc::Nn] {
+            let p = Params {
+                tracker: a,
+                ..Params::for_frame(W)
+            };
+            let r =
+                reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
+            let core = run_core_full_cfg(&h, a, cfg);
+            let rep = reference::track::compare(&core, &r);
+            assert!(rep.identical(), "seed {seed} {a:?}: {rep:?}");
+            differ_from_default +=
+                reference::track::compare(&core, &run_core_full(&h, a)).differing;
+        }
+    }
+    // The view and the bound are not a no-op on these hauls.
+    assert!(differ_from_default > 0);
+}
+
 fn run_core_full(h: &Haul, assoc: Assoc) -> Vec<reference::track::Assignment> {
     run_core_full_cfg(h, assoc, TrackConfig::for_frame(W, W))
 }

@@ -259,6 +259,9 @@ pub struct Robust {
     /// Scale c of the histogram term's soft bound
     /// (`TrackConfig::hist_robust`); ∞ = z.
     pub hist: f32,
+    /// Scale c of the depth term's soft bound
+    /// (`TrackConfig::depth_robust`); ∞ = z.
+    pub depth: f32,
 }
 
 impl Robust {
@@ -267,6 +270,7 @@ impl Robust {
         cap: f32::INFINITY,
         area: f32::INFINITY,
         hist: f32::INFINITY,
+        depth: f32::INFINITY,
     };
 }
 
@@ -288,8 +292,9 @@ pub fn soft_bound(z: f32, c: f32) -> f32 {
 /// (`TrackConfig::cue_cap`; default ∞, see there): at 5 fps single cues are
 /// heavy-tailed (a fish turns, bends, or is cut by the border), and one
 /// outlying cue must not veto a link the other cues support. The
-/// appearance terms (area, histogram) can instead be softly bounded,
-/// [`soft_bound`] with `r.area` / `r.hist` (default ∞). With
+/// appearance terms (area, histogram) and the stereo depth term can instead
+/// be softly bounded, [`soft_bound`] with `r.area` / `r.hist` / `r.depth`
+/// (see the `TrackConfig` fields for their defaults). With
 /// [`Robust::NONE`] this is eq. (9) exactly.
 pub fn camera_cost(f: &EdgeFeatures, s: &Sigmas, first: bool, cues: Cues, r: &Robust) -> f32 {
     let mut c = 0.0;
@@ -308,7 +313,7 @@ pub fn camera_cost(f: &EdgeFeatures, s: &Sigmas, first: bool, cues: Cues, r: &Ro
         c += t(soft_bound(f.h2 / s.h, r.hist));
     }
     if cues.has(Cues::DEPTH) {
-        c += t(f.z2 / s.d);
+        c += t(soft_bound(f.z2 / s.d, r.depth));
     }
     c
 }
@@ -384,6 +389,19 @@ mod tests {
         let want = 1.0 + 4.0 * (1.25f64).ln() + 4.0 + 4.0 * (3.25f64).ln();
         let got = camera_cost(&f, &s, false, Cues::ALL, &soft) as f64;
         assert!((got - want).abs() < 1e-5, "{got} {want}");
+        // The depth term's soft bound: z_d = 100 → 4·ln(26) (σ_d² = 1).
+        let deep = EdgeFeatures { z2: 100.0, ..f };
+        let depth_soft = Robust {
+            depth: 4.0,
+            ..Robust::NONE
+        };
+        let got = camera_cost(&deep, &s, false, Cues::ALL, &depth_soft) as f64;
+        let want = 15.0 + 4.0 * 26f64.ln();
+        assert!((got - want).abs() < 1e-4, "{got} {want}");
+        assert_eq!(
+            camera_cost(&deep, &s, false, Cues::ALL, &Robust::NONE),
+            115.0
+        );
         // ρ(z) ≤ z, ≈ z for small z, and ρ = z with c = ∞.
         assert_eq!(soft_bound(7.0, f32::INFINITY), 7.0);
         assert!((soft_bound(0.01, 9.0) - 0.01).abs() < 1e-5);

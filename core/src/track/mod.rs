@@ -139,6 +139,14 @@ pub struct TrackConfig {
     pub width: u32,
     /// Frame height, pixels.
     pub height: u32,
+    /// The left and right rectified frames' rectangles that hold the raw
+    /// views (OpenCV's `validPixROI1/2`; the whole frame by default). Their
+    /// edges are the tracker's frame border — for the exit and birth margin
+    /// M and for the border cut of the area cue: with a free scaling
+    /// `alpha > 0` the raw view ends inside the rectified frame, and a fish
+    /// cut there shows only part of its area although its box is far from
+    /// the rectified frame's edge. Clipped to the frame.
+    pub view: [Roi; 2],
     /// Cues of the matching cost (Fig. 15 ablation). Default: all.
     pub cues: Cues,
     /// Cost of a lost frame (the predicted node's edge). Default 24.
@@ -192,6 +200,14 @@ pub struct TrackConfig {
     pub area_robust: f32,
     /// Scale c of the soft bound on the histogram term z_h. Default ∞.
     pub hist_robust: f32,
+    /// Scale c of the soft bound on the stereo depth term z_d (our cue).
+    /// σ_d is a few per cent, so one frame whose depth is wrong — a box cut
+    /// by the frame border or merged in one view, a mispaired right object
+    /// (on synthetic hauls about 5 % of tracked observations are more than
+    /// 20 % off) — gives z_d in the hundreds and vetoes a link that every
+    /// other cue supports; the track then splits. With c the term grows
+    /// only as c·ln(1 + z/c) beyond c. Default DEPTH_ROBUST.
+    pub depth_robust: f32,
     /// Fold shared tracks (Viterbi; our addition, see the module docs
     /// "Folding"): a track closing with nothing committed yet whose every
     /// observation lies on another, at least as long track's path is that
@@ -199,12 +215,31 @@ pub struct TrackConfig {
     pub fold_shared: bool,
 }
 
+/// Default [`TrackConfig::depth_robust`].
+pub const DEPTH_ROBUST: f32 = f32::INFINITY;
+
+/// True when `b` comes within `k` pixels of an edge of `view` or crosses it
+/// (`b.x ≤ view.x + k`, …): a box there may be cut by the view's border.
+pub fn near_edge(b: &Roi, view: &Roi, k: u32) -> bool {
+    b.x <= view.x.saturating_add(k)
+        || b.y <= view.y.saturating_add(k)
+        || b.right().saturating_add(k) >= view.right()
+        || b.bottom().saturating_add(k) >= view.bottom()
+}
+
 impl TrackConfig {
+    /// [`TrackConfig::view`] clipped to the frame.
+    pub fn views(&self) -> [Roi; 2] {
+        let f = Roi::full(self.width, self.height);
+        [self.view[0].intersect(&f), self.view[1].intersect(&f)]
+    }
+
     /// Defaults for a `width × height` rectified frame.
     pub fn for_frame(width: u32, height: u32) -> TrackConfig {
         TrackConfig {
             width,
             height,
+            view: [Roi::full(width, height); 2],
             cues: Cues::ALL,
             miss_cost: 24.0,
             share_cost: 24.0,
@@ -220,6 +255,7 @@ impl TrackConfig {
             swap_passes: 4,
             area_robust: f32::INFINITY,
             hist_robust: f32::INFINITY,
+            depth_robust: DEPTH_ROBUST,
             fold_shared: true,
         }
     }
@@ -229,6 +265,15 @@ impl TrackConfig {
         let pos = |v: f32| v.is_finite() && v > 0.0;
         if self.width == 0 || self.height == 0 || self.width > 32_000 || self.height > 32_000 {
             return Err(TrackError::Config("width/height: 1 to 32000"));
+        }
+        if self
+            .view
+            .iter()
+            .any(|v| v.intersect(&Roi::full(self.width, self.height)).is_empty())
+        {
+            return Err(TrackError::Config(
+                "view: a non-empty rectangle inside the frame",
+            ));
         }
         if !self.share_cost.is_finite() || self.share_cost < 0.0 {
             return Err(TrackError::Config("share_cost: finite, ≥ 0"));
@@ -243,9 +288,11 @@ impl TrackConfig {
             || self.area_robust <= 0.0
             || self.hist_robust.is_nan()
             || self.hist_robust <= 0.0
+            || self.depth_robust.is_nan()
+            || self.depth_robust <= 0.0
         {
             return Err(TrackError::Config(
-                "miss_cost, gate_cost, nn_gate, lost_gate: finite, > 0; cue_cap, area_robust, hist_robust: > 0",
+                "miss_cost, gate_cost, nn_gate, lost_gate: finite, > 0; cue_cap, area_robust, hist_robust, depth_robust: > 0",
             ));
         }
         if self.max_lost as usize + 2 > depth {
@@ -677,6 +724,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 cap: self.cfg.cue_cap,
                 area: self.cfg.area_robust,
                 hist: self.cfg.hist_robust,
+                depth: self.cfg.depth_robust,
             },
         };
         match params.tracker {
@@ -815,21 +863,18 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 self.stats.obs_invalid = self.stats.obs_invalid.saturating_add(1);
                 continue;
             }
-            let (w, h) = (self.cfg.width, self.cfg.height);
-            let view = |v: &CameraView| ViewFeat {
+            let [vl, vr] = self.cfg.views();
+            let view = |v: &CameraView, r: &Roi| ViewFeat {
                 pos: [v.cx, v.cy],
                 area: v.area as f32,
-                cut: v.bbox.x <= 2
-                    || v.bbox.y <= 2
-                    || v.bbox.right().saturating_add(2) >= w
-                    || v.bbox.bottom().saturating_add(2) >= h,
+                cut: near_edge(&v.bbox, r, 2),
                 cdf: cdf(&v.hist),
             };
             let _ = self.cands.push(Cand {
                 obs: i as u16,
                 pair: o.pair,
-                left: view(&o.left),
-                right: o.right.as_ref().map(view),
+                left: view(&o.left, &vl),
+                right: o.right.as_ref().map(|v| view(v, &vr)),
                 depth: o.depth(),
                 bbox: o.left.bbox,
                 area: o.left.area,
@@ -1068,7 +1113,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
 
     /// New targets from unassociated observations (see the module docs).
     fn births(&mut self, frame: u32, params: &Params, first_frame: bool, sv2: f32) {
-        let (w, h, m) = (self.cfg.width, self.cfg.height, params.margin);
+        let (vl, m) = (self.cfg.views()[0], params.margin);
         let big = self.cfg.birth_area_factor * params.area_min as f32;
         for c in self.cands.iter() {
             if self.taken.get(c.obs as usize).copied().unwrap_or(true) {
@@ -1088,11 +1133,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
             if near_lost {
                 continue;
             }
-            let b = &c.bbox;
-            let near_border = b.x < m
-                || b.y < m
-                || b.right().saturating_add(m) > w
-                || b.bottom().saturating_add(m) > h;
+            let near_border = m > 0 && near_edge(&c.bbox, &vl, m - 1);
             if !first_frame && !near_border && (c.area as f32) < big {
                 continue;
             }
@@ -1200,8 +1241,10 @@ fn advance<const D: usize, const K: usize, const H: usize, const N: usize>(
         if s.vel_known {
             let p = s.left.pos;
             let m = params.margin as f32;
-            let (w, h) = (cfg.width as f32, cfg.height as f32);
-            if !(p[0] >= m && p[0] < w - m && p[1] >= m && p[1] < h - m) {
+            let v = cfg.views()[0];
+            let (x0, y0) = (v.x as f32 + m, v.y as f32 + m);
+            let (x1, y1) = (v.right() as f32 - m, v.bottom() as f32 - m);
+            if !(p[0] >= x0 && p[0] < x1 && p[1] >= y0 && p[1] < y1) {
                 t.pending = Some(CloseReason::Exit);
                 return;
             }

@@ -390,3 +390,78 @@ proptest! {
         }
     }
 }
+
+/// [`run`] with a tracking configuration of the caller's.
+fn run_cfg(frames: &[Vec<Observation>], cfg: TrackConfig) -> Log {
+    let mut tr: DefaultTracker = Tracker::new(cfg).unwrap();
+    let p = Params::for_frame(W);
+    let mut log = Log::default();
+    {
+        let mut sink = log.sink();
+        for (f, obs) in frames.iter().enumerate() {
+            tr.step(f as u32, obs, &p, &mut sink).unwrap();
+        }
+        tr.finish(&mut sink);
+    }
+    log
+}
+
+#[test]
+fn the_raw_views_rectangle_is_the_border() {
+    // The raw left view starts at x = 550 of the rectified frame (a free
+    // scaling alpha > 0 puts fill to its left). A fish crossing towards -x
+    // at 200 px/frame is last seen at x = 800; a small object appears at
+    // x = 600, within M of the view's edge but far from the frame's.
+    let mut frames = Vec::new();
+    for t in 0..7 {
+        let mut v = Vec::new();
+        if t < 4 {
+            v.push(fish(1400.0 - 200.0 * t as f32, 1000.0, 400.0, 9, 1800.0, 0));
+        }
+        if t == 2 {
+            v.push(fish(600.0, 400.0, 90.0, 2, 2500.0, 1));
+        }
+        frames.push(v);
+    }
+    let full = TrackConfig::for_frame(W, W);
+    let view = TrackConfig {
+        view: [Roi::new(550, 0, W - 550, W), Roi::new(0, 0, W - 550, W)],
+        ..full
+    };
+    let (a, b) = (run_cfg(&frames, full), run_cfg(&frames, view));
+    let reason = |l: &Log| l.closed.iter().find(|c| c.2 == 4).map(|c| c.1);
+    // whole frame: the predictions (x = 600, 400) stay inside the margin,
+    // the fish is lost; raw view: at x = 600 it left through the view's
+    // border (x < 550 + M)
+    assert_eq!(reason(&a), Some(CloseReason::Lost), "{:?}", a.closed);
+    assert_eq!(reason(&b), Some(CloseReason::Exit), "{:?}", b.closed);
+    // the small object is born only where it touches the view's margin
+    assert!(a.ids_of(2, 1).is_empty(), "{:?}", a.frames);
+    assert_eq!(b.ids_of(2, 1).len(), 1, "{:?}", b.frames);
+    // the view is clipped to the frame; an empty one is refused
+    assert_eq!(
+        TrackConfig {
+            view: [Roi::new(0, 0, 9999, 9999); 2],
+            ..full
+        }
+        .views(),
+        [Roi::full(W, W); 2]
+    );
+    let bad = TrackConfig {
+        view: [Roi::new(W, 0, 10, 10), Roi::full(W, W)],
+        ..full
+    };
+    assert!(bad.validate(16).is_err());
+}
+
+#[test]
+fn near_edge_is_the_border_test_of_a_box() {
+    let v = Roi::new(100, 50, 1000, 800);
+    assert!(near_edge(&Roi::new(102, 400, 50, 50), &v, 2));
+    assert!(!near_edge(&Roi::new(103, 400, 50, 50), &v, 2));
+    assert!(near_edge(&Roi::new(500, 400, 598, 50), &v, 2)); // right = 1098
+    assert!(!near_edge(&Roi::new(500, 400, 597, 50), &v, 2));
+    assert!(near_edge(&Roi::new(0, 0, 5, 5), &v, 0)); // outside the view
+    assert!(near_edge(&Roi::new(500, 52, 10, 10), &v, 2));
+    assert!(near_edge(&Roi::new(500, 400, 10, 448), &v, 2)); // bottom = 848
+}

@@ -213,9 +213,10 @@ struct Costs {
     v_init: [f64; 2],
     z_ref: f64,
     cap: f64,
-    /// Soft-bound scales of the area and histogram terms (∞ = none).
+    /// Soft-bound scales of the area, histogram and depth terms (∞ = none).
     area_c: f64,
     hist_c: f64,
+    depth_c: f64,
 }
 
 struct Feat {
@@ -305,7 +306,7 @@ fn cam_cost(f: &Feat, k: &Costs, first: bool) -> f64 {
         (2, soft(f.a2 / k.s[2], k.area_c)),
         (4, f.m2 / k.s[3]),
         (8, soft(f.h2 / k.s[4], k.hist_c)),
-        (16, f.z2 / k.s[5]),
+        (16, soft(f.z2 / k.s[5], k.depth_c)),
     ];
     terms
         .iter()
@@ -369,20 +370,30 @@ pub fn run(
     let alpha = p.alpha as f64;
     let miss = cfg.miss_cost as f64;
     let gate = cfg.gate_cost as f64;
-    let (w, h, m) = (cfg.width as f64, cfg.height as f64, p.margin as f64);
+    let m = p.margin as f64;
+    // The raw views' rectangles, clipped to the frame: (x0, y0, x1, y1).
+    let rect = |r: &fishtrack_core::Roi| {
+        let x0 = r.x.min(cfg.width) as u64;
+        let y0 = r.y.min(cfg.height) as u64;
+        let x1 = (r.x as u64 + r.w as u64).min(cfg.width as u64);
+        let y1 = (r.y as u64 + r.h as u64).min(cfg.height as u64);
+        (x0, y0, x1, y1)
+    };
+    let views = [rect(&cfg.view[0]), rect(&cfg.view[1])];
 
     for (fi, obs) in frames.iter().enumerate() {
         let frame = fi as u32;
-        let view = |v: &fishtrack_core::track::CameraView| View {
+        // A box within 2 px of its view's edge (or across it) may be cut.
+        let view = |v: &fishtrack_core::track::CameraView, cam: usize| View {
             pos: [v.cx as f64, v.cy as f64],
             area: v.area as f64,
             cut: {
                 let b = &v.bbox;
-                let (w, h) = (cfg.width as u64, cfg.height as u64);
-                b.x <= 2
-                    || b.y <= 2
-                    || b.x as u64 + b.w as u64 + 2 >= w
-                    || b.y as u64 + b.h as u64 + 2 >= h
+                let (vx0, vy0, vx1, vy1) = views[cam];
+                b.x as u64 <= vx0 + 2
+                    || b.y as u64 <= vy0 + 2
+                    || b.x as u64 + b.w as u64 + 2 >= vx1
+                    || b.y as u64 + b.h as u64 + 2 >= vy1
             },
             cdf: cdf(&v.hist),
         };
@@ -393,8 +404,8 @@ pub fn run(
             .filter(|(_, o)| o.is_valid())
             .map(|(i, o)| Cand {
                 obs: i,
-                left: view(&o.left),
-                right: o.right.as_ref().map(view),
+                left: view(&o.left, 0),
+                right: o.right.as_ref().map(|v| view(v, 1)),
                 depth: o.depth().map(|z| z as f64),
                 bbox: (
                     o.left.bbox.x,
@@ -432,6 +443,7 @@ pub fn run(
             cap: cfg.cue_cap as f64,
             area_c: cfg.area_robust as f64,
             hist_c: cfg.hist_robust as f64,
+            depth_c: cfg.depth_robust as f64,
         };
         let mut taken = vec![false; obs.len()];
 
@@ -662,7 +674,9 @@ pub fn run(
             t.front = new.into_iter().map(|x| x.0).collect();
             if best.vel_known && new_best_lost {
                 let q = best.left.pos;
-                if !(q[0] >= m && q[0] < w - m && q[1] >= m && q[1] < h - m) {
+                let (vx0, vy0, vx1, vy1) = views[0];
+                let (vx0, vy0, vx1, vy1) = (vx0 as f64, vy0 as f64, vx1 as f64, vy1 as f64);
+                if !(q[0] >= vx0 + m && q[0] < vx1 - m && q[1] >= vy0 + m && q[1] < vy1 - m) {
                     t.pending = true;
                 }
             }
@@ -738,10 +752,9 @@ pub fn run(
                 continue;
             }
             let (x0, y0, x1, y1) = c.bbox;
-            let near = x0 < mu
-                || y0 < mu
-                || x1.saturating_add(mu) > cfg.width
-                || y1.saturating_add(mu) > cfg.height;
+            let (vx0, vy0, vx1, vy1) = views[0];
+            let (mu, x0, y0, x1, y1) = (mu as u64, x0 as u64, y0 as u64, x1 as u64, y1 as u64);
+            let near = x0 < vx0 + mu || y0 < vy0 + mu || x1 + mu > vx1 || y1 + mu > vy1;
             // In the first frame every fish is already inside the view.
             if fi > 0 && !near && c.area < big {
                 continue;
