@@ -225,6 +225,8 @@ fn truth_as_output_scores_one_everywhere() {
     );
     assert_eq!(tr.mot.num_objects as f64, N_COUNTABLE);
     assert_eq!(tr.success.rate, 1.0);
+    let d = tr.success_detected.as_ref().unwrap();
+    assert_eq!((d.correctly_labelled, d.fish, d.rate), (4, 4, 1.0));
     assert_eq!(tr.count.error, 0.0);
     let l = tr.length.as_ref().unwrap();
     assert_eq!((l.mape, l.fraction_measured, l.measurable), (0.0, 1.0, 4));
@@ -542,4 +544,55 @@ fn cli_eval_prints_table_and_json_and_rejects_bad_input() {
     let o = run(false);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("appears twice in frame 1"));
+}
+
+/// Eq. (16) among the detected fish: a fish the detections never found
+/// leaves the population of `success_detected` but not that of `success`;
+/// one found in under half of its countable frames leaves it too; a split
+/// fish stays in both and fails both.
+#[test]
+fn success_among_detected_fish_drops_the_undetected_from_the_population() {
+    let t = truth();
+    let dir = tempfile::tempdir().unwrap();
+    // tracks: the truth's, but fish 4 split over two ids
+    let rows: Vec<Row> = truth_tracks(&t)
+        .into_iter()
+        .map(|(f, id, b)| (f, if id == 4 && f >= 8 { 40 } else { id }, b))
+        .collect();
+    write_tracks(dir.path(), &rows);
+    // detections: none of fish 1; fish 2 in 3 of its 7 countable frames
+    // (3–5), every other fish in every frame
+    let mut s = String::new();
+    for f in &t.fish {
+        for a in &f.frames {
+            let keep = match f.id {
+                1 => false,
+                2 => (2..=5).contains(&a.frame),
+                _ => true,
+            };
+            if keep {
+                let b = a.left_box.unwrap();
+                s += &format!(
+                    "{},-1,{},{},{},{},1,-1,-1,-1\n",
+                    a.frame, b[0], b[1], b[2], b[3]
+                );
+            }
+        }
+    }
+    write(&dir.path().join("detections.csv"), &s);
+    let r = eval(&t, dir.path());
+    let tr = r.tracking.unwrap();
+    // every countable fish: 1, 2, 3 labelled, 4 split
+    assert_eq!((tr.success.correctly_labelled, tr.success.fish), (3, 4));
+    // detected (in at least half of their countable frames): fish 3 and 4
+    let d = tr.success_detected.unwrap();
+    assert_eq!((d.correctly_labelled, d.fish), (1, 2), "{d:?}");
+    assert!(close(d.rate, 0.5));
+    // without detections.csv there is no such score
+    std::fs::remove_file(dir.path().join("detections.csv")).unwrap();
+    assert!(eval(&t, dir.path())
+        .tracking
+        .unwrap()
+        .success_detected
+        .is_none());
 }

@@ -221,6 +221,12 @@ pub struct SuccessScore {
     pub correctly_labelled: u64,
     /// correctly_labelled / fish.
     pub rate: f64,
+    /// Per truth fish (index of `truth.fish`): correctly labelled.
+    #[serde(skip)]
+    pub labelled: Vec<bool>,
+    /// Per truth fish: its countable frames.
+    #[serde(skip)]
+    pub countable_frames: Vec<u64>,
 }
 
 /// Count error: (tracks − fish) / fish.
@@ -267,13 +273,65 @@ pub struct TrackingScore {
     pub detection: DetectionScore,
     /// CLEAR MOT and ID measures (motmetrics definitions, IoU ≥ 0.4).
     pub mot: MotSummary,
-    /// Tracking success rate, eq. (16).
+    /// Tracking success rate, eq. (16), over every countable fish.
     pub success: SuccessScore,
+    /// Eq. (16) over the fish detections.csv found
+    /// ([`score_success_detected`]; `None` without detections.csv).
+    pub success_detected: Option<SuccessScore>,
     /// Count error.
     pub count: CountScore,
     /// Per-fish length MAPE from fish.csv over fish wholly inside both views
     /// in some frame (`None` without fish.csv).
     pub length: Option<LengthScore>,
+}
+
+/// Per truth fish: how many of its countable frames a box of `rows`
+/// matches (one-to-one per frame, IoU ≥ 0.4, as every score here).
+fn countable_hits(tf: &TruthFrames<'_>, rows: &[MotRow]) -> Vec<u64> {
+    let by = by_frame(rows);
+    let mut hits = vec![0u64; tf.truth.fish.len()];
+    for f in frames_of(tf, &by) {
+        let preds = by.get(&f).map_or(&[][..], |v| v.as_slice());
+        let boxes: Vec<[f64; 4]> = preds.iter().map(|r| r.bbox).collect();
+        for st in &match_frame(tf, f, &boxes).preds {
+            if let PredState::Hit(k) = *st {
+                hits[k] += 1;
+            }
+        }
+    }
+    hits
+}
+
+/// Eq. (16) as the paper words it, "correctly labelled / correctly
+/// detected": the population is the countable fish that the *detections*
+/// match in at least half of their countable frames (the bar eq. (16)
+/// sets for a correct label), so fish the segmentation never found do not
+/// count against the tracker. [`TrackingScore::success`] keeps every
+/// countable fish in the population (stricter than the paper end to end;
+/// the same with perfect detections).
+pub fn score_success_detected(
+    tf: &TruthFrames<'_>,
+    success: &SuccessScore,
+    dets: &[MotRow],
+) -> SuccessScore {
+    let hits = countable_hits(tf, dets);
+    let detected: Vec<usize> = tf
+        .countable_fish()
+        .into_iter()
+        .filter(|&k| 2 * hits[k] >= success.countable_frames[k] && hits[k] > 0)
+        .collect();
+    let correct = detected
+        .iter()
+        .filter(|&&k| success.labelled.get(k).copied().unwrap_or(false))
+        .count() as u64;
+    let n = detected.len() as u64;
+    SuccessScore {
+        fish: n,
+        correctly_labelled: correct,
+        rate: correct as f64 / n.max(1) as f64,
+        labelled: Vec::new(),
+        countable_frames: Vec::new(),
+    }
 }
 
 /// Scores a tracker output.
@@ -317,9 +375,8 @@ pub fn score_tracks(
         }
     }
     let population = tf.countable_fish();
-    let correct = population
-        .iter()
-        .filter(|&&k| {
+    let labelled: Vec<bool> = (0..nfish)
+        .map(|k| {
             let ids = &countable_ids[k];
             let first = match ids.first() {
                 Some(&id) => id,
@@ -329,12 +386,15 @@ pub fn score_tracks(
                 && owners.get(&first).is_some_and(|o| o.len() == 1)
                 && 2 * ids.len() as u64 >= countable_frames[k]
         })
-        .count() as u64;
+        .collect();
+    let correct = population.iter().filter(|&&k| labelled[k]).count() as u64;
     let n = population.len() as u64;
     let success = SuccessScore {
         fish: n,
         correctly_labelled: correct,
         rate: correct as f64 / n as f64,
+        labelled,
+        countable_frames,
     };
 
     let tracks_n = match fish_rows {
@@ -370,6 +430,7 @@ pub fn score_tracks(
         detection: tally.finish(),
         mot: mot_inputs(tf, tracks).summarize(MAX_DISTANCE),
         success,
+        success_detected: None,
         count,
         length,
     }

@@ -88,9 +88,13 @@ pub fn evaluate_truth(truth: &Truth, out: &Path) -> Result<Report, InputError> {
     } else {
         None
     };
+    let mut tracking = tracking;
     let segmentation = if dets_p.is_file() {
         let dets = io::read_mot(&dets_p)?;
         check_rows(&dets_p, &dets, truth.frames, false)?;
+        if let Some(t) = tracking.as_mut() {
+            t.success_detected = Some(metrics::score_success_detected(&tf, &t.success, &dets));
+        }
         Some(metrics::score_detections(&tf, &dets))
     } else {
         None

@@ -106,6 +106,12 @@ impl Table {
                 t.success.fish
             ),
         );
+        if let Some(d) = &t.success_detected {
+            self.row(
+                "success among detected fish",
+                format!("{} ({}/{})", pct(d.rate), d.correctly_labelled, d.fish),
+            );
+        }
         self.row(
             "count error",
             format!(
