@@ -1288,6 +1288,19 @@ mod bits {
 /// 0 / 255, replicated border (`cv2.medianBlur(mask, 3)` on a 0/255 mask):
 /// a pixel is set when at least 5 of its 9 neighbours are.
 pub fn median3_binary(src: ImageView<'_>, dst: &mut [u8]) -> Result<(), MorphError> {
+    let w = src.width();
+    median3_binary_in(src, dst, |_| 0..w)
+}
+
+/// [`median3_binary`] computed only at the columns `cols(y)` of each row
+/// `y` (clipped to the row), every other pixel of `dst` set to 0: equal to
+/// the whole median followed by zeroing outside `cols` (the neighbours are
+/// read wherever they are), at the cost of the columns kept.
+pub fn median3_binary_in(
+    src: ImageView<'_>,
+    dst: &mut [u8],
+    cols: impl Fn(usize) -> core::ops::Range<usize>,
+) -> Result<(), MorphError> {
     let (w, h) = (src.width(), src.height());
     if dst.len() < w * h {
         return Err(MorphError::DstTooSmall);
@@ -1306,9 +1319,14 @@ pub fn median3_binary(src: ImageView<'_>, dst: &mut [u8]) -> Result<(), MorphErr
             g(up) + g(mid) + g(down)
         };
         let out = &mut dst[y * w..(y + 1) * w];
-        let mut x0 = 0usize;
-        while x0 < w {
-            let x1 = (x0 + MEDIAN_BLOCK).min(w);
+        let span = cols(y);
+        let (c0, c1) = (span.start.min(w), span.end.min(w));
+        // (store loops, not memset: see `label::fill_stores`)
+        crate::label::fill_stores(&mut out[..c0], 0);
+        crate::label::fill_stores(&mut out[c1.max(c0)..], 0);
+        let mut x0 = c0;
+        while x0 < c1 {
+            let x1 = (x0 + MEDIAN_BLOCK).min(c1);
             let n = x1 - x0;
             pad[0] = count(x0.saturating_sub(1));
             pad[n + 1] = count(if x1 < w { x1 } else { w - 1 });
@@ -1493,6 +1511,21 @@ mod tests {
                         }
                     }
                     prop_assert_eq!(out[y * w + x], if n >= 5 { 255 } else { 0 }, "({}, {})", x, y);
+                }
+            }
+            // the span-limited median: the same inside each row's span, 0 outside
+            let cols = |y: usize| {
+                let a = (seed as usize >> (y % 8)) % (w + 3);
+                let b = (seed as usize >> (8 + y % 8)) % (w + 3);
+                a.min(b)..a.max(b)
+            };
+            let mut part = vec![9u8; w * h];
+            median3_binary_in(ImageView::packed(&img, w, h).unwrap(), &mut part, cols).unwrap();
+            for y in 0..h {
+                let c = cols(y);
+                for x in 0..w {
+                    let want = if c.contains(&x) { out[y * w + x] } else { 0 };
+                    prop_assert_eq!(part[y * w + x], want, "span ({}, {}) {:?}", x, y, c);
                 }
             }
         }

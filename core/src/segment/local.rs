@@ -48,7 +48,7 @@ use crate::hist::{
 };
 use crate::image::{ImageView, Roi};
 use crate::label::{label_components, Moments};
-use crate::morph::{close_disk_in_place, median3_binary, open_disk_in_place, Disk};
+use crate::morph::{close_disk_in_place, median3_binary_in, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
 use crate::smooth::box_mean_roi;
@@ -179,6 +179,55 @@ pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
     }
     let (med, mad) = median_mad(lower, &mut [0u32; 256]);
     (med as u8, (1.4826 * mad as f32).max(1.0))
+}
+
+/// Section III.D's closing then opening by `disk` of the packed
+/// `rw × rh` mask `a`, computed on the window of `a` that holds its
+/// nonzero pixels' box `bbox` (`[x0, y0, x1, y1)`) grown by `2r + 2` (r the
+/// disk's radius) and clipped to the mask: outside that window both results
+/// are 0 (a closing then opening never reaches farther than 2r from the
+/// mask), and inside it every neighbourhood the two operations read lies in
+/// the window or beyond the mask's border, where the window's border is the
+/// mask's. So the result equals the operations on the whole mask, for the
+/// cost of the window (a region's ellipse box is several times its
+/// objects'). `win` holds the window packed, `tmp` is the operations'
+/// scratch; both at least `rw · rh` bytes.
+#[allow(clippy::too_many_arguments)]
+fn close_open_window(
+    a: &mut [u8],
+    (rw, rh): (usize, usize),
+    bbox: [usize; 4],
+    disk: &Disk,
+    win: &mut [u8],
+    tmp: &mut [u8],
+    disk_scratch: &mut [u8],
+) -> Result<(), SegmentError> {
+    if bbox[0] >= bbox[2] || bbox[1] >= bbox[3] {
+        return Ok(()); // an empty mask stays empty
+    }
+    let m = 2 * disk.radius + 2;
+    let (x0, y0) = (bbox[0].saturating_sub(m), bbox[1].saturating_sub(m));
+    let (x1, y1) = ((bbox[2] + m).min(rw), (bbox[3] + m).min(rh));
+    let (ww, wh) = (x1 - x0, y1 - y0);
+    let n = ww * wh;
+    let win = win.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+    for (j, wrow) in win.chunks_exact_mut(ww).enumerate() {
+        let src = a
+            .get((y0 + j) * rw + x0..(y0 + j) * rw + x1)
+            .ok_or(SegmentError::WorkspaceTooSmall)?;
+        wrow.copy_from_slice(src);
+    }
+    close_disk_in_place(win, ww, wh, disk, tmp, disk_scratch)
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    open_disk_in_place(win, ww, wh, disk, tmp, disk_scratch)
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    for (j, wrow) in win.chunks_exact(ww).enumerate() {
+        let dst = a
+            .get_mut((y0 + j) * rw + x0..(y0 + j) * rw + x1)
+            .ok_or(SegmentError::WorkspaceTooSmall)?;
+        dst.copy_from_slice(wrow);
+    }
+    Ok(())
 }
 
 /// Row `j` of a `rw`-wide label buffer (empty past its end: never panics).
@@ -360,16 +409,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     }
     // 3 × 3 median on both masks (M_low into `c`, M_high into `a`),
     // restricted to the ellipse again
-    median3_binary(view(a, rw, rh)?, c).map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    median3_binary(view(b, rw, rh)?, a).map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    for (j, sp) in spans.iter().enumerate() {
-        let r = span(sp);
-        let (rc, ra) = (&mut c[j * rw..(j + 1) * rw], &mut a[j * rw..(j + 1) * rw]);
-        rc[..r.start].fill(0);
-        ra[..r.start].fill(0);
-        rc[r.end..].fill(0);
-        ra[r.end..].fill(0);
-    }
+    let cols = |j: usize| spans.get(j).map_or(0..0, span);
+    median3_binary_in(view(a, rw, rh)?, c, cols).map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    median3_binary_in(view(b, rw, rh)?, a, cols).map_err(|_| SegmentError::WorkspaceTooSmall)?;
 
     // --- histogram backprojection, eq. (2)–(3): B into `b` ---
     if params.double_threshold && params.backprojection {
@@ -474,7 +516,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     if !acc.iter().any(|&v| v != 0) {
         return Ok(());
     }
-    // (labels are 0 outside the ellipse)
+    // (labels are 0 outside the ellipse); the accepted pixels' bounding
+    // box [x0, x1) × [y0, y1) in ROI coordinates
+    let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
     for (j, sp) in spans.iter().enumerate() {
         let r = span(sp);
         let Some(ra) = a.get_mut(j * rw..(j + 1) * rw) else {
@@ -482,6 +526,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         };
         ra.fill(0);
         let lrow = row_of(labels, j, rw).get(r.clone()).unwrap_or(&[]);
+        let x_off = r.start;
         let ra = ra.get_mut(r).unwrap_or(&mut []);
         let mut i = 0;
         while let Some((l, i0, i1)) = next_run(lrow, i) {
@@ -490,15 +535,20 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             if let Some(part) = ra.get_mut(i0..i1) {
                 part.fill(v);
             }
+            if v != 0 {
+                bbox = [
+                    bbox[0].min(x_off + i0),
+                    bbox[1].min(j),
+                    bbox[2].max(x_off + i1),
+                    bbox[3].max(j + 1),
+                ];
+            }
         }
     }
 
     // --- post-processing, Section III.D: closing then opening ---
     let disk = Disk::opencv_ellipse(params.disk_size);
-    close_disk_in_place(a, rw, rh, &disk, c, disk_scratch)
-        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    open_disk_in_place(a, rw, rh, &disk, c, disk_scratch)
-        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    close_open_window(a, (rw, rh), bbox, &disk, b, c, disk_scratch)?;
 
     // --- final components and their statistics ---
     let n2 = label_components(view(a, rw, rh)?, labels, |ar| ar >= amin && ar <= amax)
@@ -572,6 +622,41 @@ mod tests {
     use std::vec::Vec;
 
     proptest::proptest! {
+        /// Closing then opening on the window around the mask's box equals
+        /// both operations on the whole mask, whatever the box's place
+        /// (against the ROI border or not) and the disk.
+        #[test]
+        fn close_open_window_equals_whole_mask(w in 1usize..90, h in 1usize..70,
+                                               bx in 0usize..90, by in 0usize..70,
+                                               bw in 1usize..40, bh in 1usize..40,
+                                               size in proptest::sample::select(std::vec![3u8, 5, 7, 9]),
+                                               seed in proptest::prelude::any::<u64>()) {
+            let mut s = seed | 1;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+            // a random blob inside the box (clipped to the mask)
+            let (x0, y0) = (bx.min(w - 1), by.min(h - 1));
+            let (x1, y1) = ((x0 + bw).min(w), (y0 + bh).min(h));
+            let mut a = std::vec![0u8; w * h];
+            let mut bbox = [usize::MAX, usize::MAX, 0, 0];
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    if next() % 3 != 0 {
+                        a[y * w + x] = 255;
+                        bbox = [bbox[0].min(x), bbox[1].min(y), bbox[2].max(x + 1), bbox[3].max(y + 1)];
+                    }
+                }
+            }
+            let disk = Disk::opencv_ellipse(size);
+            let mut tmp = std::vec![0u8; w * h];
+            let mut scratch = std::vec![0u8; crate::morph::disk_scratch_len(w, disk.radius)];
+            let mut whole = a.clone();
+            close_disk_in_place(&mut whole, w, h, &disk, &mut tmp, &mut scratch).unwrap();
+            open_disk_in_place(&mut whole, w, h, &disk, &mut tmp, &mut scratch).unwrap();
+            let mut win = std::vec![0u8; w * h];
+            close_open_window(&mut a, (w, h), bbox, &disk, &mut win, &mut tmp, &mut scratch).unwrap();
+            proptest::prop_assert_eq!(a, whole);
+        }
+
         /// [`next_run`] walks the same runs of equal non-zero labels as a
         /// pixel-by-pixel scan.
         #[test]

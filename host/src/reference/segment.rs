@@ -383,7 +383,8 @@ pub fn coarse_low(filtered: &GrayImage, p: &Params) -> (Vec<[f64; 5]>, u16, u16)
 }
 
 /// Robust white-noise σ of `img` in 1/16 grey levels (core:
-/// `noise::noise_sigma16`): d = a − b − c + e over disjoint 2 × 2 blocks,
+/// `noise::noise_sigma16`): d = a − b − c + e over disjoint 2 × 2 blocks of
+/// every `NOISE_BLOCK_ROW_STEP`-th block row,
 /// σ = 1.4826 · median|d| / 2 with the median of the integer |d| taken as
 /// the grouped-data median (values of k spread over [k − ½, k + ½), 0
 /// over [0, ½)).
@@ -391,7 +392,8 @@ pub fn noise_sigma16(img: &GrayImage) -> u32 {
     let (w, h) = img.dimensions();
     let px = |x: u32, y: u32| img.get_pixel(x, y).0[0] as i64;
     let mut d: Vec<u64> = Vec::new();
-    for by in 0..h / 2 {
+    let step = fishtrack_core::noise::NOISE_BLOCK_ROW_STEP as u32;
+    for by in (0..h / 2).filter(|by| by % step == 0) {
         for bx in 0..w / 2 {
             let (x, y) = (2 * bx, 2 * by);
             d.push((px(x, y) - px(x + 1, y) - px(x, y + 1) + px(x + 1, y + 1)).unsigned_abs());
