@@ -9,10 +9,10 @@
 //!   `σ = 1.4826 · median|d| / 2`, the median interpolated inside its
 //!   histogram bin because `|d|` is an integer of only a few units.
 //!   Returned in sixteenths of a grey level. Every
-//!   [`NOISE_BLOCK_ROW_STEP`]-th row of blocks is used (a 2048² frame
-//!   still gives 262 144 blocks, so the median moves by about 0.1 %; the
-//!   whole frame cost 1.2 instructions per pixel of the pair, a sixth of
-//!   them now — issue 8).
+//!   [`NOISE_BLOCK_ROW_STEP`]-th row of blocks is used: a 2048² frame
+//!   still gives 524 288 blocks, so the median moves by a fraction of a
+//!   per cent, and the estimate costs half of the whole frame's 1.2
+//!   instructions per pixel of the pair (issue 8; README "Performance").
 //!
 //! Integer arithmetic per pixel; no allocation; never panics.
 
