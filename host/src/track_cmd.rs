@@ -626,6 +626,8 @@ fn write_summary(
         .map(|(k, v)| (*k, v * 1000.0 / frames.max(1) as f64))
         .collect();
     let t = &stats.track;
+    let valid = setup.rectifier.valid_rois();
+    let roi_json = |r: &Roi| json!([r.x, r.y, r.w, r.h]);
     let summary = json!({
         "haul": setup.haul.dir.display().to_string(),
         "frames": frames,
@@ -677,6 +679,12 @@ fn write_summary(
             "workspace_bytes": DefaultPipeline::workspace_size(setup.width as usize, setup.height as usize),
         },
         "params": setup.params,
+        "rectification": {
+            "alpha": setup.rectifier.alpha,
+            "focal_px": setup.rectifier.rect.p1[(0, 0)],
+            "valid_left": roi_json(&valid[0]),
+            "valid_right": roi_json(&valid[1]),
+        },
     });
     write_json(&out.join("summary.json"), &summary)
 }

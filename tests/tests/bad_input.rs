@@ -294,8 +294,29 @@ fn single_frame_haul_is_valid() {
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(o.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["frames"], 1);
+    // the rectification used: the default alpha, a focal length, and the
+    // valid rectangles inside the frame
+    let r = &summary["rectification"];
+    assert_eq!(r["alpha"], 0.25);
+    assert!(r["focal_px"].as_f64().unwrap() > 0.0);
+    let w = summary["width"].as_u64().unwrap();
+    for k in ["valid_left", "valid_right"] {
+        let v: Vec<u64> = r[k]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_u64().unwrap())
+            .collect();
+        assert!(v.len() == 4 && v[2] > 0 && v[0] + v[2] <= w, "{k}: {v:?}");
+    }
     assert!(o.join("overlays/000001.png").is_file());
     assert!(o.join("length_frequency.svg").is_file());
+    // `--rect-alpha auto` records the alpha the rig got (at least 0.25)
+    let (out, o2) = track(&h, &["--rect-alpha", "auto"]);
+    assert_ok(&out);
+    let s2: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(o2.join("summary.json")).unwrap()).unwrap();
+    assert!(s2["rectification"]["alpha"].as_f64().unwrap() >= 0.25);
 }
 
 /// A haul with no fish: `synth --fish-rate 0` (mesh, debris, snow, no fish)
