@@ -192,7 +192,6 @@ pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
 /// cost of the window (a region's ellipse box is several times its
 /// objects'). `win` holds the window packed, `tmp` is the operations'
 /// scratch; both at least `rw · rh` bytes.
-#[allow(clippy::too_many_arguments)]
 fn close_open_window(
     a: &mut [u8],
     (rw, rh): (usize, usize),

@@ -854,6 +854,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         for t in self.taken.iter_mut() {
             *t = false;
         }
+        let [vl, vr] = self.cfg.views();
         for (i, o) in observations.iter().enumerate() {
             if i >= N {
                 self.stats.obs_dropped = self.stats.obs_dropped.saturating_add(1);
@@ -863,7 +864,6 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 self.stats.obs_invalid = self.stats.obs_invalid.saturating_add(1);
                 continue;
             }
-            let [vl, vr] = self.cfg.views();
             let view = |v: &CameraView, r: &Roi| ViewFeat {
                 pos: [v.cx, v.cy],
                 area: v.area as f32,
