@@ -59,6 +59,7 @@ fn tweak(cfg: &mut TrackConfig) {
             match k {
                 "fold" => cfg.fold_shared = on,
                 "depth_robust" => cfg.depth_robust = x.parse().unwrap(),
+                "cut_aware" => cfg.cut_aware_motion = on,
                 _ => panic!("FISHTRACK_RULES: unknown rule {k}"),
             }
         }

@@ -18,7 +18,10 @@
 //!   θ = 0 for a displacement under 1 px;
 //!   **Deviation (border cuts):** a view whose box touches the frame border
 //!   (within 2 px) shows only part of the fish, so its area is a lower
-//!   bound: the area cue is 0 when the cut view is the smaller one;
+//!   bound: the area cue is 0 when the cut view is the smaller one; and its
+//!   centroid is off the fish's, so displacements (vicinity, direction,
+//!   the velocity of eq. 13–14) are measured on the box sides the border
+//!   does not cut ([`motion_delta`], `TrackConfig::cut_aware_motion`);
 //! - direction reference: **v_ref is the node's own velocity** when it has
 //!   one (the target's motion trend, eq. 14); a node without a velocity
 //!   (a target's first frame) has no direction cue. The paper chooses v_ref
@@ -132,8 +135,45 @@ pub struct ViewFeat {
     pub area: f32,
     /// The box touches the frame border: the area is a lower bound.
     pub cut: bool,
+    /// The upright box `[x0, y0, x1, y1)` in the centroid's coordinates.
+    pub bbox: [f32; 4],
+    /// Which sides of the box the border cuts ([`CUT_X_MIN`], …).
+    pub cut_sides: u8,
     /// Normalised cumulative histogram (`None` when the histogram is empty).
     pub cdf: Option<Cdf>,
+}
+
+/// [`ViewFeat::cut_sides`] bit: the border cuts the box's left side.
+pub const CUT_X_MIN: u8 = 1;
+/// The box's right side is cut.
+pub const CUT_X_MAX: u8 = 2;
+/// The box's top side is cut.
+pub const CUT_Y_MIN: u8 = 4;
+/// The box's bottom side is cut.
+pub const CUT_Y_MAX: u8 = 8;
+
+/// The fish's displacement from view `a` to view `b` (our addition, beyond
+/// eq. (7)–(8)). A view the frame border cuts shows only part of the fish,
+/// so its centroid lies off the fish's, towards the inside of the frame, by
+/// up to half a body length (a fish entering at the right border moves
+/// hundreds of pixels less, centroid to centroid, than it swims). Along an
+/// axis where one of the two boxes is cut on one side only, the
+/// displacement is therefore that of the box sides the border does not cut
+/// (the fish's head or tail, seen whole in both views); otherwise, and with
+/// `cut_aware` false (the paper), that of the centroids.
+pub fn motion_delta(a: &ViewFeat, b: &ViewFeat, cut_aware: bool) -> [f32; 2] {
+    let axis = |k: usize, lo: u8, hi: u8| {
+        let cut = a.cut_sides | b.cut_sides;
+        let centre = b.pos[k] - a.pos[k];
+        if !cut_aware || (cut & lo != 0) == (cut & hi != 0) {
+            centre
+        } else if cut & hi != 0 {
+            b.bbox[k] - a.bbox[k]
+        } else {
+            b.bbox[k + 2] - a.bbox[k + 2]
+        }
+    };
+    [axis(0, CUT_X_MIN, CUT_X_MAX), axis(1, CUT_Y_MIN, CUT_Y_MAX)]
 }
 
 /// Squared feature values of one camera's edge (what σ estimation collects).
@@ -203,19 +243,22 @@ pub fn normalised_area(area: f32, depth: Option<f32>, z_ref: f32) -> f32 {
     }
 }
 
-/// Squared features of one camera's edge from node view `prev` (projected to
-/// `pred`) to observation view `cand`. `depths` are (node, observation); the
-/// areas are depth-normalised only when both are known.
+/// Squared features of one camera's edge from node view `prev` (moving by
+/// `vel`) to observation view `cand`: the vicinity is the displacement
+/// ([`motion_delta`]) minus `vel`, i.e. `x_j − x̂_i`. `depths` are (node,
+/// observation); the areas are depth-normalised only when both are known.
 pub fn edge_features(
     prev: &ViewFeat,
-    pred: [f32; 2],
+    vel: [f32; 2],
     cand: &ViewFeat,
     depths: (Option<f32>, Option<f32>),
     v_ref: [f32; 2],
     z_ref: f32,
+    cut_aware: bool,
 ) -> EdgeFeatures {
-    let dx = cand.pos[0] - pred[0];
-    let dy = cand.pos[1] - pred[1];
+    let disp = motion_delta(prev, cand, cut_aware);
+    let dx = disp[0] - vel[0];
+    let dy = disp[1] - vel[1];
     let (za, zb) = match depths {
         (Some(a), Some(b)) => (Some(a), Some(b)),
         _ => (None, None),
@@ -228,10 +271,7 @@ pub fn edge_features(
     } else {
         0.0
     };
-    let th = direction_angle(
-        [cand.pos[0] - prev.pos[0], cand.pos[1] - prev.pos[1]],
-        v_ref,
-    );
+    let th = direction_angle(disp, v_ref);
     let e = emd(&prev.cdf, &cand.cdf);
     let dz = match (za, zb) {
         (Some(a), Some(b)) if a + b > 0.0 => 2.0 * libm::fabsf(a - b) / (a + b),
@@ -415,12 +455,16 @@ mod tests {
             pos: [0.0, 0.0],
             area: 4000.0,
             cut: false,
+            bbox: [0.0; 4],
+            cut_sides: 0,
             cdf: None,
         };
         let q = ViewFeat {
             pos: [0.0, 0.0],
             area: 1000.0,
             cut: false,
+            bbox: [0.0; 4],
+            cut_sides: 0,
             cdf: None,
         };
         let f = edge_features(
@@ -430,6 +474,7 @@ mod tests {
             (Some(1000.0), Some(2000.0)),
             [-1.0, 0.0],
             2000.0,
+            true,
         );
         assert!(f.a2 < 1e-12);
         let g = edge_features(
@@ -439,6 +484,7 @@ mod tests {
             (None, Some(2000.0)),
             [-1.0, 0.0],
             2000.0,
+            true,
         );
         assert!((g.a2 - 1.44).abs() < 1e-5); // 2·3000/5000 = 1.2
     }

@@ -123,7 +123,7 @@ pub use observation::{CameraView, Observation};
 use crate::error::ParamError;
 use crate::image::Roi;
 use crate::params::{Params, Tracker as Association};
-use cost::{camera_cost, cdf, edge_features, EdgeFeatures, ViewFeat};
+use cost::{camera_cost, cdf, edge_features, motion_delta, EdgeFeatures, ViewFeat};
 use sigma::SigmaEstimator;
 use viterbi::{round_i16, Node, NodeState, Trellis, PREDICTED};
 
@@ -208,6 +208,11 @@ pub struct TrackConfig {
     /// other cue supports; the track then splits. With c the term grows
     /// only as c·ln(1 + z/c) beyond c. Default DEPTH_ROBUST.
     pub depth_robust: f32,
+    /// Displacements between views the frame border cuts are measured on
+    /// the box sides it does not cut ([`cost::motion_delta`]; our
+    /// addition): vicinity, direction, velocity (eq. 13–14) and the σ
+    /// samples. False: centroids throughout, as the paper.
+    pub cut_aware_motion: bool,
     /// Fold shared tracks (Viterbi; our addition, see the module docs
     /// "Folding"): a track closing with nothing committed yet whose every
     /// observation lies on another, at least as long track's path is that
@@ -217,6 +222,25 @@ pub struct TrackConfig {
 
 /// Default [`TrackConfig::depth_robust`].
 pub const DEPTH_ROBUST: f32 = f32::INFINITY;
+
+/// The sides of box `b` within `k` pixels of the matching side of `view`
+/// or beyond it ([`cost::CUT_X_MIN`], …): where the view's border may cut it.
+pub fn cut_sides(b: &Roi, view: &Roi, k: u32) -> u8 {
+    let mut s = 0;
+    if b.x <= view.x.saturating_add(k) {
+        s |= cost::CUT_X_MIN;
+    }
+    if b.right().saturating_add(k) >= view.right() {
+        s |= cost::CUT_X_MAX;
+    }
+    if b.y <= view.y.saturating_add(k) {
+        s |= cost::CUT_Y_MIN;
+    }
+    if b.bottom().saturating_add(k) >= view.bottom() {
+        s |= cost::CUT_Y_MAX;
+    }
+    s
+}
 
 /// True when `b` comes within `k` pixels of an edge of `view` or crosses it
 /// (`b.x ≤ view.x + k`, …): a box there may be cut by the view's border.
@@ -256,6 +280,7 @@ impl TrackConfig {
             area_robust: f32::INFINITY,
             hist_robust: f32::INFINITY,
             depth_robust: DEPTH_ROBUST,
+            cut_aware_motion: true,
             fold_shared: true,
         }
     }
@@ -472,6 +497,7 @@ struct Ctx {
     v_init: [f32; 2],
     z_ref: f32,
     robust: Robust,
+    cut_aware: bool,
 }
 
 /// Per-camera features of one stereo edge.
@@ -493,18 +519,11 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
     let vel = if first { x.v_init } else { p.vel };
     let depths = (p.depth, c.depth);
     let v_ref = direction_ref(p);
-    let fl = edge_features(
-        &p.left,
-        add(p.left.pos, vel),
-        &c.left,
-        depths,
-        v_ref,
-        x.z_ref,
-    );
+    let fl = edge_features(&p.left, vel, &c.left, depths, v_ref, x.z_ref, x.cut_aware);
     let cl = camera_cost(&fl, &x.sig, first, x.cues, &x.robust);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let fr = edge_features(pr, add(pr.pos, vel), cr, depths, v_ref, x.z_ref);
+            let fr = edge_features(pr, vel, cr, depths, v_ref, x.z_ref, x.cut_aware);
             let c_r = camera_cost(&fr, &x.sig, first, x.cues, &x.robust);
             Edge {
                 cost: cl + c_r,
@@ -550,8 +569,8 @@ fn direction_ref(p: &NodeState) -> [f32; 2] {
 }
 
 /// State of a real node reached from `p` (eq. 13–14).
-fn real_state(p: &NodeState, cost: f32, c: &Cand, alpha: f32) -> NodeState {
-    let d = [c.left.pos[0] - p.left.pos[0], c.left.pos[1] - p.left.pos[1]];
+fn real_state(p: &NodeState, cost: f32, c: &Cand, alpha: f32, cut_aware: bool) -> NodeState {
+    let d = motion_delta(&p.left, &c.left, cut_aware);
     let vel = if p.vel_known {
         [
             alpha * d[0] + (1.0 - alpha) * p.vel[0],
@@ -576,12 +595,26 @@ fn predicted_state(p: &NodeState, cost: f32, v_init: [f32; 2]) -> NodeState {
     let vel = if p.vel_known { p.vel } else { v_init };
     let mut s = *p;
     s.cost = cost;
-    s.left.pos = add(p.left.pos, vel);
+    s.left = shifted(&p.left, vel);
     if let Some(r) = s.right.as_mut() {
-        r.pos = add(r.pos, vel);
+        *r = shifted(r, vel);
     }
     s.lost = p.lost.saturating_add(1);
     s
+}
+
+/// A view moved by `v` (a lost target's prediction): centroid and box; the
+/// box keeps the sides the border cut (the prediction of a partial view).
+fn shifted(f: &ViewFeat, v: [f32; 2]) -> ViewFeat {
+    let mut g = *f;
+    g.pos = add(f.pos, v);
+    g.bbox = [
+        f.bbox[0] + v[0],
+        f.bbox[1] + v[1],
+        f.bbox[2] + v[0],
+        f.bbox[3] + v[1],
+    ];
+    g
 }
 
 fn node_of(s: &NodeState, obs: u16, pair: u16, pred: usize) -> Node {
@@ -720,6 +753,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 .sigma
                 .v_init_or(min, default_v_init(params, self.cfg.width)),
             z_ref: self.cfg.z_ref_mm,
+            cut_aware: self.cfg.cut_aware_motion,
             robust: Robust {
                 cap: self.cfg.cue_cap,
                 area: self.cfg.area_robust,
@@ -868,6 +902,13 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 pos: [v.cx, v.cy],
                 area: v.area as f32,
                 cut: near_edge(&v.bbox, r, 2),
+                bbox: [
+                    v.bbox.x as f32,
+                    v.bbox.y as f32,
+                    v.bbox.right() as f32,
+                    v.bbox.bottom() as f32,
+                ],
+                cut_sides: cut_sides(&v.bbox, r, 2),
                 cdf: cdf(&v.hist),
             };
             let _ = self.cands.push(Cand {
@@ -969,7 +1010,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 let (Some(c), Some(p)) = (self.cands.get(ci), t.trellis.front.get(pi)) else {
                     continue;
                 };
-                let s = real_state(p, acc, c, params.alpha);
+                let s = real_state(p, acc, c, params.alpha, ctx.cut_aware);
                 let _ = nodes.push(node_of(&s, c.obs, c.pair, pi));
                 let _ = states.push(s);
             }
@@ -1045,7 +1086,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                     match a.and_then(|ci| self.cands.get(ci as usize)) {
                         Some(c) => {
                             let e = edge(p, c, ctx);
-                            let s = real_state(p, p.cost + e.cost, c, params.alpha);
+                            let s = real_state(p, p.cost + e.cost, c, params.alpha, ctx.cut_aware);
                             let _ = nodes.push(node_of(&s, c.obs, c.pair, pi));
                             let _ = states.push(s);
                         }
@@ -1114,6 +1155,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
     /// New targets from unassociated observations (see the module docs).
     fn births(&mut self, frame: u32, params: &Params, first_frame: bool, sv2: f32) {
         let (vl, m) = (self.cfg.views()[0], params.margin);
+        let cut_aware = self.cfg.cut_aware_motion;
         let big = self.cfg.birth_area_factor * params.area_min as f32;
         for c in self.cands.iter() {
             if self.taken.get(c.obs as usize).copied().unwrap_or(true) {
@@ -1125,8 +1167,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                     .best_front()
                     .and_then(|b| t.trellis.front.get(b))
                     .is_some_and(|s| {
-                        let dx = c.left.pos[0] - s.left.pos[0];
-                        let dy = c.left.pos[1] - s.left.pos[1];
+                        let [dx, dy] = motion_delta(&s.left, &c.left, cut_aware);
                         s.lost > 0 && (dx * dx + dy * dy) / sv2 < self.cfg.lost_gate
                     })
             });
@@ -1228,7 +1269,7 @@ fn advance<const D: usize, const K: usize, const H: usize, const N: usize>(
                 if let Some(r) = e.right.as_ref() {
                     sigma.push_features(r, first);
                 }
-                sigma.push_velocity([c.left.pos[0] - p.left.pos[0], c.left.pos[1] - p.left.pos[1]]);
+                sigma.push_velocity(motion_delta(&p.left, &c.left, ctx.cut_aware));
             }
         }
     }

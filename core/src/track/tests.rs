@@ -465,3 +465,93 @@ fn near_edge_is_the_border_test_of_a_box() {
     assert!(near_edge(&Roi::new(500, 52, 10, 10), &v, 2));
     assert!(near_edge(&Roi::new(500, 400, 10, 448), &v, 2)); // bottom = 848
 }
+
+/// A left-only observation with an explicit box (a view the border may cut).
+fn boxed(bbox: Roi, area: u32, pair: u16) -> Observation {
+    let mut o = fish(0.0, 0.0, 100.0, 8, 2000.0, pair);
+    o.left.bbox = bbox;
+    o.left.cx = bbox.x as f32 + bbox.w as f32 / 2.0;
+    o.left.cy = bbox.y as f32 + bbox.h as f32 / 2.0;
+    o.left.area = area;
+    o.right = None;
+    o.depth_mm = None;
+    o
+}
+
+#[test]
+fn a_fish_entering_cut_by_the_border_is_followed_by_its_head() {
+    // A 400-px fish swims in from the right border at 500 px/frame. In
+    // frame 0 only its front 150 px are in view, so its centroid moves
+    // 375 px to frame 1, not 500; a school mate appears in frame 2 where
+    // that centroid step would put it (x = W − 825), while the fish itself
+    // is at W − 950. Measured on the uncut (left) box sides, the first step
+    // is the fish's 500 px and its track takes the fish; with centroids
+    // (the paper) it takes the school mate.
+    let (y, h) = (900u32, 100u32);
+    let body = 400 * h * 7 / 10;
+    let at = |x0: u32, w: u32, area: u32, pair: u16| boxed(Roi::new(x0, y, w, h), area, pair);
+    let frames = std::vec![
+        std::vec![at(W - 150, 150, body * 150 / 400, 0)],
+        std::vec![at(W - 650, 400, body, 0)],
+        std::vec![at(W - 1150, 400, body, 0), at(W - 1025, 400, body, 1)],
+        std::vec![at(W - 1650, 400, body, 0)],
+    ];
+    let cfg = TrackConfig::for_frame(W, W);
+    let aware = run_cfg(&frames, cfg);
+    let paper = run_cfg(
+        &frames,
+        TrackConfig {
+            cut_aware_motion: false,
+            ..cfg
+        },
+    );
+    let id = |l: &Log, f: u32, o: u16| l.ids_of(f, o).first().copied();
+    let first = id(&aware, 0, 0);
+    assert!(first.is_some(), "{:?}", aware.frames);
+    for f in 1..4 {
+        assert_eq!(id(&aware, f, 0), first, "frame {f}: {:?}", aware.frames);
+    }
+    assert_ne!(id(&aware, 2, 1), first, "{:?}", aware.frames);
+    // the paper's centroid step hands frame 2's school mate to the fish
+    assert_eq!(id(&paper, 2, 1), id(&paper, 0, 0), "{:?}", paper.frames);
+}
+
+#[test]
+fn motion_delta_uses_the_sides_the_border_does_not_cut() {
+    let view = Roi::full(W, W);
+    let feat = |b: Roi| cost::ViewFeat {
+        pos: [b.x as f32 + b.w as f32 / 2.0, b.y as f32 + b.h as f32 / 2.0],
+        area: (b.w * b.h) as f32,
+        cut: near_edge(&b, &view, 2),
+        bbox: [b.x as f32, b.y as f32, b.right() as f32, b.bottom() as f32],
+        cut_sides: cut_sides(&b, &view, 2),
+        cdf: None,
+    };
+    // cut at the right border, then whole: the left sides' step in x, the
+    // centroids' in y (no side cut along y)
+    let a = feat(Roi::new(W - 150, 500, 150, 100));
+    let b = feat(Roi::new(W - 650, 560, 400, 120));
+    assert_eq!(a.cut_sides, cost::CUT_X_MAX);
+    assert_eq!(cost::motion_delta(&a, &b, true), [-500.0, 70.0]);
+    assert_eq!(cost::motion_delta(&a, &b, false), [-375.0, 70.0]);
+    // leaving at the left border: the right sides
+    let c = feat(Roi::new(0, 560, 120, 120));
+    assert_eq!(c.cut_sides, cost::CUT_X_MIN);
+    assert_eq!(
+        cost::motion_delta(&b, &c, true),
+        [120.0 - (W as f32 - 250.0), 0.0]
+    );
+    // cut on both sides of an axis (wider than the view): centroids
+    let d = feat(Roi::new(0, 0, W, 50));
+    assert_eq!(
+        d.cut_sides,
+        cost::CUT_X_MIN | cost::CUT_X_MAX | cost::CUT_Y_MIN
+    );
+    assert_eq!(cost::motion_delta(&d, &b, true)[0], b.pos[0] - d.pos[0]);
+    // nothing cut: centroids
+    let e = feat(Roi::new(700, 700, 300, 80));
+    assert_eq!(
+        cost::motion_delta(&b, &e, true),
+        cost::motion_delta(&b, &e, false)
+    );
+}

@@ -280,6 +280,8 @@ pub fn view_feat(pos: [f32; 2], area: u32, cdf: Option<Cdf>) -> ViewFeat {
         pos,
         area: area as f32,
         cut: false,
+        bbox: [pos[0], pos[1], pos[0], pos[1]],
+        cut_sides: 0,
         cdf,
     }
 }

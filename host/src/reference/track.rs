@@ -123,7 +123,44 @@ struct View {
     pos: [f64; 2],
     area: f64,
     cut: bool,
+    /// Upright box: min corner, max corner (exclusive).
+    lo: [f64; 2],
+    hi: [f64; 2],
+    /// Per axis (x, y): the border cuts the min side / the max side.
+    cut_lo: [bool; 2],
+    cut_hi: [bool; 2],
     cdf: Option<[f64; 15]>,
+}
+
+/// Displacement of the fish from view `a` to view `b` (core:
+/// `track::cost::motion_delta`): per axis, when the border cuts one side
+/// of either box (and not the other side), the uncut sides' displacement;
+/// otherwise the centroids'.
+fn displacement(a: &View, b: &View, cut_aware: bool) -> [f64; 2] {
+    let mut d = [0.0; 2];
+    for k in 0..2 {
+        let lo = a.cut_lo[k] || b.cut_lo[k];
+        let hi = a.cut_hi[k] || b.cut_hi[k];
+        d[k] = if cut_aware && hi && !lo {
+            b.lo[k] - a.lo[k]
+        } else if cut_aware && lo && !hi {
+            b.hi[k] - a.hi[k]
+        } else {
+            b.pos[k] - a.pos[k]
+        };
+    }
+    d
+}
+
+/// `v` moved by `d` (a lost target's prediction): centroid and box.
+fn moved(v: &View, d: [f64; 2]) -> View {
+    let mut m = v.clone();
+    for k in 0..2 {
+        m.pos[k] += d[k];
+        m.lo[k] += d[k];
+        m.hi[k] += d[k];
+    }
+    m
 }
 
 #[derive(Debug, Clone)]
@@ -217,6 +254,8 @@ struct Costs {
     area_c: f64,
     hist_c: f64,
     depth_c: f64,
+    /// `TrackConfig::cut_aware_motion`.
+    cut_aware: bool,
 }
 
 struct Feat {
@@ -243,7 +282,7 @@ fn cdf(h: &[u32; 16]) -> Option<[f64; 15]> {
 
 fn feat(
     p: &View,
-    pred: [f64; 2],
+    vel: [f64; 2],
     c: &View,
     depths: (Option<f64>, Option<f64>),
     v_ref: [f64; 2],
@@ -262,7 +301,7 @@ fn feat(
     } else {
         0.0
     };
-    let v = [c.pos[0] - p.pos[0], c.pos[1] - p.pos[1]];
+    let v = displacement(p, c, k.cut_aware);
     let th = if v[0] * v[0] + v[1] * v[1] < 1.0 || v_ref == [0.0, 0.0] {
         0.0
     } else {
@@ -281,7 +320,7 @@ fn feat(
         _ => 0.0,
     };
     Feat {
-        d2: (c.pos[0] - pred[0]).powi(2) + (c.pos[1] - pred[1]).powi(2),
+        d2: (v[0] - vel[0]).powi(2) + (v[1] - vel[1]).powi(2),
         a2: rel * rel,
         m2: th * th,
         h2: emd * emd,
@@ -322,18 +361,11 @@ fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
     let d = (p.depth, c.depth);
     // Direction reference: the target's own velocity; none in its first frame.
     let v_ref = if p.vel_known { p.vel } else { [0.0, 0.0] };
-    let fl = feat(
-        &p.left,
-        [p.left.pos[0] + v[0], p.left.pos[1] + v[1]],
-        &c.left,
-        d,
-        v_ref,
-        k,
-    );
+    let fl = feat(&p.left, v, &c.left, d, v_ref, k);
     let cl = cam_cost(&fl, k, first);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let fr = feat(pr, [pr.pos[0] + v[0], pr.pos[1] + v[1]], cr, d, v_ref, k);
+            let fr = feat(pr, v, cr, d, v_ref, k);
             let cr_ = cam_cost(&fr, k, first);
             (cl + cr_, fl, Some(fr))
         }
@@ -395,6 +427,22 @@ pub fn run(
                     || b.x as u64 + b.w as u64 + 2 >= vx1
                     || b.y as u64 + b.h as u64 + 2 >= vy1
             },
+            lo: [v.bbox.x as f64, v.bbox.y as f64],
+            hi: [
+                v.bbox.x as f64 + v.bbox.w as f64,
+                v.bbox.y as f64 + v.bbox.h as f64,
+            ],
+            cut_lo: {
+                let (vx0, vy0, _, _) = views[cam];
+                [v.bbox.x as u64 <= vx0 + 2, v.bbox.y as u64 <= vy0 + 2]
+            },
+            cut_hi: {
+                let (_, _, vx1, vy1) = views[cam];
+                [
+                    v.bbox.x as u64 + v.bbox.w as u64 + 2 >= vx1,
+                    v.bbox.y as u64 + v.bbox.h as u64 + 2 >= vy1,
+                ]
+            },
             cdf: cdf(&v.hist),
         };
         let cands: Vec<Cand> = obs
@@ -444,6 +492,7 @@ pub fn run(
             area_c: cfg.area_robust as f64,
             hist_c: cfg.hist_robust as f64,
             depth_c: cfg.depth_robust as f64,
+            cut_aware: cfg.cut_aware_motion,
         };
         let mut taken = vec![false; obs.len()];
 
@@ -558,10 +607,7 @@ pub fn run(
             // New stage: (state, node).
             let mut new: Vec<(State, Node)> = Vec::new();
             let mk_real = |pst: &State, pi: usize, acc: f64, c: &Cand| -> (State, Node) {
-                let d = [
-                    c.left.pos[0] - pst.left.pos[0],
-                    c.left.pos[1] - pst.left.pos[1],
-                ];
+                let d = displacement(&pst.left, &c.left, k.cut_aware);
                 let vel = if pst.vel_known {
                     [
                         alpha * d[0] + (1.0 - alpha) * pst.vel[0],
@@ -590,9 +636,9 @@ pub fn run(
                 let v = if pst.vel_known { pst.vel } else { v_init };
                 let mut s = pst.clone();
                 s.cost = pst.cost + miss;
-                s.left.pos = [pst.left.pos[0] + v[0], pst.left.pos[1] + v[1]];
+                s.left = moved(&pst.left, v);
                 if let Some(r) = s.right.as_mut() {
-                    r.pos = [r.pos[0] + v[0], r.pos[1] + v[1]];
+                    *r = moved(r, v);
                 }
                 s.lost = pst.lost + 1;
                 (
@@ -665,8 +711,9 @@ pub fn run(
                     push(&mut sig.h, f.h2);
                     push(&mut sig.d, f.z2);
                 }
-                push(&mut sig.vx, c.left.pos[0] - pst.left.pos[0]);
-                push(&mut sig.vy, c.left.pos[1] - pst.left.pos[1]);
+                let dv = displacement(&pst.left, &c.left, k.cut_aware);
+                push(&mut sig.vx, dv[0]);
+                push(&mut sig.vy, dv[1]);
             }
             let best = new[bi].0.clone();
             let new_best_lost = new[bi].1.obs.is_none();
@@ -743,8 +790,7 @@ pub fn run(
                     }
                 });
                 t.front.get(b).is_some_and(|s| {
-                    let dx = c.left.pos[0] - s.left.pos[0];
-                    let dy = c.left.pos[1] - s.left.pos[1];
+                    let [dx, dy] = displacement(&s.left, &c.left, k.cut_aware);
                     s.lost > 0 && (dx * dx + dy * dy) / k.s[0] < cfg.lost_gate as f64
                 })
             });
