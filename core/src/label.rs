@@ -239,9 +239,30 @@ fn union(labels: &mut [i32], a: usize, b: usize) {
 pub fn label_components(
     mask: crate::image::ImageView<'_>,
     labels: &mut [i32],
+    keep: impl FnMut(u32) -> bool,
+) -> Result<u32, LabelError> {
+    let w = mask.width();
+    label_components_in(mask, labels, |_| 0..w, keep)
+}
+
+/// [`label_components`] of a mask that is zero outside the columns
+/// `cols(y)` of each row `y` (the ellipse spans of a local region): only
+/// those columns are read and written, so labels outside them keep
+/// whatever they held (read them through the same columns). With
+/// `cols(y) = 0..width` this is [`label_components`]; a range reaching past
+/// the width is clipped to it.
+pub fn label_components_in(
+    mask: crate::image::ImageView<'_>,
+    labels: &mut [i32],
+    cols: impl Fn(usize) -> core::ops::Range<usize>,
     mut keep: impl FnMut(u32) -> bool,
 ) -> Result<u32, LabelError> {
     let (w, h) = (mask.width(), mask.height());
+    let span = |y: usize| {
+        let r = cols(y);
+        let end = r.end.min(w);
+        r.start.min(end)..end
+    };
     let n = w.checked_mul(h).ok_or(LabelError::BufferTooSmall)?;
     if labels.len() < n || n >= i32::MAX as usize {
         return Err(LabelError::BufferTooSmall);
@@ -250,25 +271,28 @@ pub fn label_components(
     // pass 1: runs, unions with the 8-neighbours on the previous row
     for y in 0..h {
         let row = mask.row(y);
-        let mut x = 0;
-        while x < w {
+        let cs = span(y);
+        let (mut x, end) = (cs.start, cs.end);
+        while x < end {
             // background: skipped 16 pixels at a time, labels zeroed in one fill
-            let z = next_where(row, x, w, true);
+            let z = next_where(row, x, end, true);
             if let Some(l) = labels.get_mut(y * w + x..y * w + z) {
                 fill_stores(l, 0);
             }
             x = z;
-            if x >= w {
+            if x >= end {
                 break;
             }
             let x0 = x;
-            x = next_where(row, x, w, false);
+            x = next_where(row, x, end, false);
             let p0 = y * w + x0;
             labels[p0] = -((x - x0) as i32);
             for l in &mut labels[p0 + 1..y * w + x] {
                 *l = p0 as i32 + 1;
             }
             if y > 0 {
+                // (the previous row is zero outside its columns, so its
+                // foreground is found on the mask whatever they are)
                 let lo = x0.saturating_sub(1);
                 let hi = x.min(w - 1); // inclusive: x is the pixel right of the run
                 let prev = (y - 1) * w;
@@ -295,13 +319,14 @@ pub fn label_components(
     let mut next = 0u32;
     for y in 0..h {
         let row = mask.row(y);
-        let mut x = 0;
-        while x < w {
-            x = next_where(row, x, w, true);
-            if x >= w {
+        let cs = span(y);
+        let (mut x, end) = (cs.start, cs.end);
+        while x < end {
+            x = next_where(row, x, end, true);
+            if x >= end {
                 break;
             }
-            let x1 = next_where(row, x, w, false);
+            let x1 = next_where(row, x, end, false);
             let i = y * w + x;
             let v = labels[i];
             let l = if v < 0 {
@@ -965,6 +990,42 @@ mod tests {
                 prop_assert_eq!(labels[i], want);
             }
             prop_assert!(label_components(ImageView::packed(&mask, w, h).unwrap(), &mut labels[..w * h - 1], |_| true).is_err());
+        }
+
+        /// On a mask that is zero outside per-row column spans (an
+        /// ellipse's), labelling only the spans gives, inside them, the
+        /// whole labelling's labels and count, and writes nothing outside.
+        #[test]
+        fn label_components_in_spans_equals_whole(w in 1usize..90, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
+            let mut mask = random_mask(w, h, seed, density);
+            let mut s = seed ^ 0x9e37_79b9_7f4a_7c15;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s as usize };
+            let spans: Vec<core::ops::Range<usize>> = (0..h).map(|_| {
+                let a = next() % (w + 1);
+                let b = next() % (w + 6); // may reach past the width
+                a.min(b)..a.max(b)
+            }).collect();
+            for (y, r) in spans.iter().enumerate() {
+                for x in 0..w {
+                    if !r.contains(&x) { mask[y * w + x] = 0; }
+                }
+            }
+            let view = ImageView::packed(&mask, w, h).unwrap();
+            let mut whole = vec![0i32; w * h];
+            let kw = label_components(view, &mut whole, |a| a >= min_area).unwrap();
+            let mut part = vec![-7i32; w * h];
+            let kp = label_components_in(view, &mut part, |y| spans[y].clone(), |a| a >= min_area).unwrap();
+            prop_assert_eq!(kp, kw);
+            for y in 0..h {
+                for x in 0..w {
+                    let i = y * w + x;
+                    if spans[y].contains(&x) {
+                        prop_assert_eq!(part[i], whole[i]);
+                    } else {
+                        prop_assert_eq!(part[i], -7);
+                    }
+                }
+            }
         }
 
         #[test]

@@ -47,7 +47,7 @@ use crate::hist::{
     ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
-use crate::label::{label_components, Moments};
+use crate::label::{label_components, label_components_in, Moments};
 use crate::morph::{close_disk_in_place, median3_binary_in, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
@@ -449,7 +449,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     // --- area and variance rejection, eq. (4)–(6): accepted mask into `a` ---
     let (amin, amax) = (params.area_min, params.area_max);
     let mut rej_area = 0u32;
-    let n1 = label_components(view(b, rw, rh)?, labels, |ar| {
+    // (B is 0 outside the ellipse, and only its spans of the labels are read)
+    let n1 = label_components_in(view(b, rw, rh)?, labels, cols, |ar| {
         let ok = ar >= amin && ar <= amax;
         rej_area += !ok as u32;
         ok
