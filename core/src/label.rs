@@ -1016,10 +1016,10 @@ mod tests {
             let mut part = vec![-7i32; w * h];
             let kp = label_components_in(view, &mut part, |y| spans[y].clone(), |a| a >= min_area).unwrap();
             prop_assert_eq!(kp, kw);
-            for y in 0..h {
+            for (y, r) in spans.iter().enumerate() {
                 for x in 0..w {
                     let i = y * w + x;
-                    if spans[y].contains(&x) {
+                    if r.contains(&x) {
                         prop_assert_eq!(part[i], whole[i]);
                     } else {
                         prop_assert_eq!(part[i], -7);
