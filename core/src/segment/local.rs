@@ -47,7 +47,7 @@ use crate::hist::{
     ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
-use crate::label::{label_components, label_components_in, Moments};
+use crate::label::{label_components_in, Moments};
 use crate::morph::{close_disk_in_place, median3_binary_in, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
@@ -191,7 +191,8 @@ pub fn water_level(h: &[u32; 256], tau: u8) -> (u8, f32) {
 /// mask's. So the result equals the operations on the whole mask, for the
 /// cost of the window (a region's ellipse box is several times its
 /// objects'). `win` holds the window packed, `tmp` is the operations'
-/// scratch; both at least `rw · rh` bytes.
+/// scratch; both at least `rw · rh` bytes. Returns the window `[x0, y0,
+/// x1, y1)` (empty for an empty mask): the result is 0 outside it.
 fn close_open_window(
     a: &mut [u8],
     (rw, rh): (usize, usize),
@@ -200,9 +201,9 @@ fn close_open_window(
     win: &mut [u8],
     tmp: &mut [u8],
     disk_scratch: &mut [u8],
-) -> Result<(), SegmentError> {
+) -> Result<[usize; 4], SegmentError> {
     if bbox[0] >= bbox[2] || bbox[1] >= bbox[3] {
-        return Ok(()); // an empty mask stays empty
+        return Ok([0; 4]); // an empty mask stays empty
     }
     let m = 2 * disk.radius + 2;
     let (x0, y0) = (bbox[0].saturating_sub(m), bbox[1].saturating_sub(m));
@@ -226,7 +227,7 @@ fn close_open_window(
             .ok_or(SegmentError::WorkspaceTooSmall)?;
         dst.copy_from_slice(wrow);
     }
-    Ok(())
+    Ok([x0, y0, x1, y1])
 }
 
 /// Row `j` of a `rw`-wide label buffer (empty past its end: never panics).
@@ -548,11 +549,27 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
 
     // --- post-processing, Section III.D: closing then opening ---
     let disk = Disk::opencv_ellipse(params.disk_size);
-    close_open_window(a, (rw, rh), bbox, &disk, b, c, disk_scratch)?;
+    let win = close_open_window(a, (rw, rh), bbox, &disk, b, c, disk_scratch)?;
 
     // --- final components and their statistics ---
-    let n2 = label_components(view(a, rw, rh)?, labels, |ar| ar >= amin && ar <= amax)
-        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    // (labelled on the window only, outside which the mask is 0; the split
+    // of merged objects reads whole label rows, so then the whole box)
+    let win = if params.split_merged {
+        [0, 0, rw, rh]
+    } else {
+        win
+    };
+    let wcols = |j: usize| {
+        if j >= win[1] && j < win[3] {
+            win[0]..win[2]
+        } else {
+            0..0
+        }
+    };
+    let n2 = label_components_in(view(a, rw, rh)?, labels, wcols, |ar| {
+        ar >= amin && ar <= amax
+    })
+    .map_err(|_| SegmentError::WorkspaceTooSmall)?;
     let n2 = if params.split_merged {
         let bufs = super::split::SplitBufs {
             lab8: a,
@@ -568,11 +585,12 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     for rec in recs.iter_mut().take(n2s) {
         clear_rec(rec);
     }
-    for j in 0..rh {
+    for j in win[1]..win[3] {
         let row = pv.row(j);
-        let lrow = row_of(labels, j, rw);
+        let lrow = row_of(labels, j, rw).get(win[0]..win[2]).unwrap_or(&[]);
         let y = roi.y + j as u32;
         for (k, i0, i1) in label_runs(lrow, n2s) {
+            let (i0, i1) = (i0 + win[0], i1 + win[0]);
             let Some(rec) = recs.get_mut(k) else {
                 continue;
             };
@@ -608,6 +626,12 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let mask = MaskRef {
             labels,
             roi,
+            valid: Roi::new(
+                roi.x + win[0] as u32,
+                roi.y + win[1] as u32,
+                (win[2] - win[0]) as u32,
+                (win[3] - win[1]) as u32,
+            ),
             label: k as i32 + 1,
         };
         emit(out, &cand, &mask, stats);

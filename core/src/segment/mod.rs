@@ -194,18 +194,23 @@ pub(crate) struct Candidate {
 pub(crate) struct MaskRef<'a> {
     pub labels: &'a [i32],
     pub roi: Roi,
+    /// The part of `roi` whose labels are valid (frame coordinates): the
+    /// mask is empty outside it.
+    pub valid: Roi,
     pub label: i32,
 }
 
 impl MaskRef<'_> {
-    /// The labels of row `y` over columns `[x0, x1)` clipped to the ROI, and
-    /// the column of the slice's first entry (empty outside the ROI).
+    /// The labels of row `y` over columns `[x0, x1)` clipped to the ROI's
+    /// valid part, and the column of the slice's first entry (empty
+    /// outside it).
     fn row_span(&self, y: u32, x0: u32, x1: u32) -> (&[i32], u32) {
-        if y < self.roi.y || y >= self.roi.bottom() {
+        let v = self.valid.intersect(&self.roi);
+        if y < v.y || y >= v.bottom() {
             return (&[], x0);
         }
-        let a = x0.max(self.roi.x);
-        let b = x1.min(self.roi.right());
+        let a = x0.max(v.x);
+        let b = x1.min(v.right());
         if b <= a {
             return (&[], a);
         }
