@@ -246,9 +246,12 @@ pub fn label_components(
 }
 
 /// [`label_components`] of a mask that is zero outside the columns
-/// `cols(y)` of each row `y` (the ellipse spans of a local region): only
-/// those columns are read and written, so labels outside them keep
-/// whatever they held (read them through the same columns). With
+/// `cols(y)` of each row `y` (the ellipse spans of a local region): labels
+/// are read and written only in those columns, so labels outside them
+/// keep whatever they held (read them through the same columns). The
+/// mask must be zero outside the columns (the previous row's mask is read
+/// beside each run to find its neighbours); otherwise the labels are
+/// wrong, though every access stays in bounds. With
 /// `cols(y) = 0..width` this is [`label_components`]; a range reaching past
 /// the width is clipped to it.
 pub fn label_components_in(

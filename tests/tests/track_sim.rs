@@ -92,12 +92,16 @@ fn view(cx: f64, cy: f64, len: f64, area: f64, hist: [u32; 16]) -> CameraView {
     CameraView {
         cx: cx as f32,
         cy: cy as f32,
-        bbox: Roi::new(
-            (cx - len / 2.0).max(0.0) as u32,
-            (cy - h / 2.0).max(0.0) as u32,
-            len as u32,
-            h.max(1.0) as u32,
-        ),
+        // the visible part of the box (a fish beyond x = 0 or y = 0 is cut)
+        bbox: {
+            let (x0, y0) = ((cx - len / 2.0).max(0.0), (cy - h / 2.0).max(0.0));
+            Roi::new(
+                x0 as u32,
+                y0 as u32,
+                (cx + len / 2.0 - x0).max(1.0) as u32,
+                (cy + h / 2.0 - y0).max(1.0) as u32,
+            )
+        },
         area: area as u32,
         hist,
     }
@@ -612,6 +616,33 @@ fn robust_appearance_core_and_reference_agree() {
             mean(&sr)
         );
     }
+}
+
+/// With the border-cut displacements off (`cut_aware_motion`, the
+/// paper's centroids) core and reference still assign identically, and
+/// the switch is not a no-op on these hauls.
+#[test]
+fn centroid_displacements_core_and_reference_agree() {
+    let mut cfg = TrackConfig::for_frame(W, W);
+    cfg.cut_aware_motion = false;
+    let mut differ_from_default = 0usize;
+    for seed in 0..4 {
+        let h = simulate(seed, 80);
+        for a in [Assoc::Viterbi, Assoc::Mc, Assoc::Nn] {
+            let p = Params {
+                tracker: a,
+                ..Params::for_frame(W)
+            };
+            let r =
+                reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
+            let core = run_core_full_cfg(&h, a, cfg);
+            let rep = reference::track::compare(&core, &r);
+            assert!(rep.identical(), "seed {seed} {a:?}: {rep:?}");
+            differ_from_default +=
+                reference::track::compare(&core, &run_core_full(&h, a)).differing;
+        }
+    }
+    assert!(differ_from_default > 0);
 }
 
 /// A raw view narrower than the frame (`TrackConfig::view`, the fill of a

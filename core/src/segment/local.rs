@@ -465,7 +465,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     for rec in recs.iter_mut().take(n1s) {
         clear_rec(rec);
     }
-    // (labels are 0 outside the ellipse: B is)
+    // (labels are valid inside the spans only: B is 0 outside them)
     for (j, sp) in spans.iter().enumerate() {
         let r = span(sp);
         let row = pv.row(j).get(r.clone()).unwrap_or(&[]);
@@ -517,7 +517,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     if !acc.iter().any(|&v| v != 0) {
         return Ok(());
     }
-    // (labels are 0 outside the ellipse); the accepted pixels' bounding
+    // (labels are valid inside the spans only); the accepted pixels' bounding
     // box [x0, x1) × [y0, y1) in ROI coordinates
     let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
     for (j, sp) in spans.iter().enumerate() {

@@ -4,7 +4,9 @@
 //! For one camera, between a trellis node i (a target hypothesis at t−1) and
 //! an observation j at t:
 //! - vicinity  z_v = ‖x_j − x̂_i‖² / σ_v², with the motion projection
-//!   x̂_i = x_i + v_i (Section IV.C.2). A node whose velocity is still
+//!   x̂_i = x_i + v_i (Section IV.C.2), computed as ‖Δ_ij − v_i‖² with
+//!   Δ_ij the displacement from i to j ([`motion_delta`]: the centroids',
+//!   or the uncut box sides' for a view the border cuts, see below). A node whose velocity is still
 //!   unknown (a target's first frame) is projected with the fleet's typical
 //!   velocity `v_init` and uses the wider σ_v0 instead (see `sigma`);
 //! - area      z_a = (ΔA)² / σ_a². Areas are first normalised to a common
@@ -14,7 +16,7 @@
 //!   difference; fish areas here span two orders of magnitude (3·10³ to
 //!   2·10⁵ px), which no single σ_a fits, so ΔA is the relative difference
 //!   `2|A_j − A_i| / (A_j + A_i)`;
-//! - direction z_m = θ(v_ij, v_ref)² / σ_m², eq. (7), v_ij = x_j − x_i;
+//! - direction z_m = θ(v_ij, v_ref)² / σ_m², eq. (7), v_ij = Δ_ij;
 //!   θ = 0 for a displacement under 1 px;
 //!   **Deviation (border cuts):** a view whose box touches the frame border
 //!   (within 2 px) shows only part of the fish, so its area is a lower
@@ -133,7 +135,8 @@ pub struct ViewFeat {
     pub pos: [f32; 2],
     /// Raw area, px.
     pub area: f32,
-    /// The box touches the frame border: the area is a lower bound.
+    /// The box touches the frame border: the area is a lower bound
+    /// (`cut_sides != 0` for a box that holds its centroid).
     pub cut: bool,
     /// The upright box `[x0, y0, x1, y1)` in the centroid's coordinates.
     pub bbox: [f32; 4],

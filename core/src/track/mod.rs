@@ -36,7 +36,9 @@
 //! 3. The minimum-cost node of the stage gives the target's position and
 //!    velocity: x_t = x_j*, v_t = α(x_j* − x_π) + (1−α)v_π (eq. 13–14; a
 //!    target's first transition sets v to the displacement, as it has no
-//!    velocity yet); its observation joins the selection set S.
+//!    velocity yet; x_j* − x_π is the displacement of [`cost::motion_delta`],
+//!    measured on the uncut box sides of a view the border cuts); its
+//!    observation joins the selection set S.
 //! 4. The target **exits** when it is lost this frame (its minimum-cost node
 //!    is the predicted one) and that predicted position lies within `margin`
 //!    M of the frame border or outside it (only once its velocity is known):
@@ -210,8 +212,11 @@ pub struct TrackConfig {
     pub depth_robust: f32,
     /// Displacements between views the frame border cuts are measured on
     /// the box sides it does not cut ([`cost::motion_delta`]; our
-    /// addition): vicinity, direction, velocity (eq. 13–14) and the σ
-    /// samples. False: centroids throughout, as the paper.
+    /// addition): vicinity, direction, velocity (eq. 13–14), the σ and
+    /// `v_init` samples and the birth rule's `lost_gate` test. False:
+    /// centroids throughout, as the paper. An observation's box must then
+    /// be its view's upright box (one that is empty or misses the centroid
+    /// counts as uncut).
     pub cut_aware_motion: bool,
     /// Fold shared tracks (Viterbi; our addition, see the module docs
     /// "Folding"): a track closing with nothing committed yet whose every
@@ -898,18 +903,28 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 self.stats.obs_invalid = self.stats.obs_invalid.saturating_add(1);
                 continue;
             }
-            let view = |v: &CameraView, r: &Roi| ViewFeat {
-                pos: [v.cx, v.cy],
-                area: v.area as f32,
-                cut: near_edge(&v.bbox, r, 2),
-                bbox: [
+            let view = |v: &CameraView, r: &Roi| {
+                let bbox = [
                     v.bbox.x as f32,
                     v.bbox.y as f32,
                     v.bbox.right() as f32,
                     v.bbox.bottom() as f32,
-                ],
-                cut_sides: cut_sides(&v.bbox, r, 2),
-                cdf: cdf(&v.hist),
+                ];
+                // a box that is empty or misses the centroid says nothing
+                // about which end of the fish is seen: centroids then
+                let sane = !v.bbox.is_empty()
+                    && v.cx >= bbox[0]
+                    && v.cx <= bbox[2]
+                    && v.cy >= bbox[1]
+                    && v.cy <= bbox[3];
+                ViewFeat {
+                    pos: [v.cx, v.cy],
+                    area: v.area as f32,
+                    cut: near_edge(&v.bbox, r, 2),
+                    bbox,
+                    cut_sides: if sane { cut_sides(&v.bbox, r, 2) } else { 0 },
+                    cdf: cdf(&v.hist),
+                }
             };
             let _ = self.cands.push(Cand {
                 obs: i as u16,

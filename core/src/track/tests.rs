@@ -13,11 +13,13 @@ const W: u32 = 2048;
 /// histogram peaked at `bin`, right view shifted by the disparity.
 fn fish(x: f32, y: f32, len: f32, bin: usize, z: f32, pair: u16) -> Observation {
     let h = len * 0.25;
+    // the visible part of the box (a fish beyond x = 0 or y = 0 is cut)
+    let (x0, y0) = ((x - len / 2.0).max(0.0), (y - h / 2.0).max(0.0));
     let bbox = Roi::new(
-        (x - len / 2.0).max(0.0) as u32,
-        (y - h / 2.0).max(0.0) as u32,
-        len as u32,
-        h as u32,
+        x0 as u32,
+        y0 as u32,
+        (x + len / 2.0 - x0).max(1.0) as u32,
+        (y + h / 2.0 - y0).max(1.0) as u32,
     );
     let mut hist = [0u32; 16];
     for (b, v) in hist.iter_mut().enumerate() {
@@ -554,4 +556,69 @@ fn motion_delta_uses_the_sides_the_border_does_not_cut() {
         cost::motion_delta(&b, &e, true),
         cost::motion_delta(&b, &e, false)
     );
+    // the 2-px tolerance at both ends of an axis
+    assert_eq!(feat(Roi::new(2, 500, 50, 20)).cut_sides, cost::CUT_X_MIN);
+    assert_eq!(feat(Roi::new(3, 500, 50, 20)).cut_sides, 0);
+    assert_eq!(
+        feat(Roi::new(W - 52, 500, 50, 20)).cut_sides,
+        cost::CUT_X_MAX
+    );
+    assert_eq!(feat(Roi::new(W - 53, 500, 50, 20)).cut_sides, 0);
+    assert_eq!(
+        feat(Roi::new(500, W - 22, 50, 20)).cut_sides,
+        cost::CUT_Y_MAX
+    );
+    // the vicinity and direction of an edge use that displacement: a
+    // target moving by (−500, 70) predicts the cut view's whole successor
+    // exactly, where its centroid step would be 125 px short
+    let f = cost::edge_features(
+        &a,
+        [-500.0, 70.0],
+        &b,
+        (None, None),
+        [-1.0, 0.0],
+        2000.0,
+        true,
+    );
+    assert_eq!(f.d2, 0.0);
+    let g = cost::edge_features(
+        &a,
+        [-500.0, 70.0],
+        &b,
+        (None, None),
+        [-1.0, 0.0],
+        2000.0,
+        false,
+    );
+    assert_eq!(g.d2, 125.0 * 125.0);
+    let th = libm::atan2f(70.0, 500.0);
+    assert!((f.m2 - th * th).abs() < 1e-6, "{}", f.m2);
+}
+
+#[test]
+fn a_box_that_misses_its_centroid_counts_as_uncut() {
+    // Observations whose boxes were left empty move by their centroids,
+    // not by a side of a meaningless box (which would make every
+    // displacement 0 and leave the choice to appearance): the fish at the
+    // newborn's projection wins over a decoy listed first (with every
+    // displacement 0 the two would tie, and the first would win).
+    let v = default_v_init(&Params::for_frame(W), W);
+    let at = |x: f32, y: f32, area: u32, pair: u16| {
+        let mut o = boxed(Roi::new(0, 0, 0, 0), area, pair);
+        o.left.cx = x;
+        o.left.cy = y;
+        o.left.bbox = Roi::default();
+        o
+    };
+    let frames = std::vec![
+        std::vec![at(1200.0, 700.0, 6000, 0)],
+        std::vec![
+            at(1300.0 + v[0], 1300.0, 6000, 0),
+            at(1200.0 + v[0], 700.0 + v[1], 7500, 1),
+        ],
+    ];
+    let log = run_cfg(&frames, TrackConfig::for_frame(W, W));
+    let id = log.ids_of(0, 0);
+    assert_eq!(id.len(), 1, "{:?}", log.frames);
+    assert_eq!(log.ids_of(1, 1), id, "{:?}", log.frames);
 }

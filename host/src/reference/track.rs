@@ -14,7 +14,9 @@
 //! births (border margin or large area, none next to a lost target's
 //! prediction) and deaths (exit margin, `max_lost`); the newborn velocity
 //! (median displacement, else v_ref · W / 4.3); greedy MC/NN; capacities
-//! T, D, K, N.
+//! T, D, K, N; displacements between views the border cuts on one side of
+//! an axis measured on the uncut box sides (`cut_aware_motion`), boxes
+//! moved with a lost target's prediction.
 //! Differences that are allowed: f64 instead of f32, exact histogram CDFs
 //! instead of 16-bit fixed point.
 #![allow(clippy::needless_range_loop)] // index loops mirror the paper's notation
@@ -150,6 +152,18 @@ fn displacement(a: &View, b: &View, cut_aware: bool) -> [f64; 2] {
         };
     }
     d
+}
+
+/// The box is a view's upright box: non-empty and holding the centroid.
+fn sane_box(v: &fishtrack_core::track::CameraView) -> bool {
+    let b = &v.bbox;
+    let (cx, cy) = (v.cx as f64, v.cy as f64);
+    b.w > 0
+        && b.h > 0
+        && cx >= b.x as f64
+        && cx <= b.right() as f64
+        && cy >= b.y as f64
+        && cy <= b.bottom() as f64
 }
 
 /// `v` moved by `d` (a lost target's prediction): centroid and box.
@@ -428,19 +442,22 @@ pub fn run(
                     || b.y as u64 + b.h as u64 + 2 >= vy1
             },
             lo: [v.bbox.x as f64, v.bbox.y as f64],
-            hi: [
-                v.bbox.x as f64 + v.bbox.w as f64,
-                v.bbox.y as f64 + v.bbox.h as f64,
-            ],
+            hi: [v.bbox.right() as f64, v.bbox.bottom() as f64],
+            // per side; none for a box that is empty or misses the centroid
             cut_lo: {
                 let (vx0, vy0, _, _) = views[cam];
-                [v.bbox.x as u64 <= vx0 + 2, v.bbox.y as u64 <= vy0 + 2]
+                let ok = sane_box(v);
+                [
+                    ok && v.bbox.x as u64 <= vx0 + 2,
+                    ok && v.bbox.y as u64 <= vy0 + 2,
+                ]
             },
             cut_hi: {
                 let (_, _, vx1, vy1) = views[cam];
+                let ok = sane_box(v);
                 [
-                    v.bbox.x as u64 + v.bbox.w as u64 + 2 >= vx1,
-                    v.bbox.y as u64 + v.bbox.h as u64 + 2 >= vy1,
+                    ok && v.bbox.x as u64 + v.bbox.w as u64 + 2 >= vx1,
+                    ok && v.bbox.y as u64 + v.bbox.h as u64 + 2 >= vy1,
                 ]
             },
             cdf: cdf(&v.hist),
