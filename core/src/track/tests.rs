@@ -571,25 +571,12 @@ fn motion_delta_uses_the_sides_the_border_does_not_cut() {
     // the vicinity and direction of an edge use that displacement: a
     // target moving by (−500, 70) predicts the cut view's whole successor
     // exactly, where its centroid step would be 125 px short
-    let f = cost::edge_features(
-        &a,
-        [-500.0, 70.0],
-        &b,
-        (None, None),
-        [-1.0, 0.0],
-        2000.0,
-        true,
-    );
+    let edge = |aware| {
+        let v = [-500.0, 70.0];
+        cost::edge_features(&a, v, &b, (None, None), [-1.0, 0.0], 2000.0, aware)
+    };
+    let (f, g) = (edge(true), edge(false));
     assert_eq!(f.d2, 0.0);
-    let g = cost::edge_features(
-        &a,
-        [-500.0, 70.0],
-        &b,
-        (None, None),
-        [-1.0, 0.0],
-        2000.0,
-        false,
-    );
     assert_eq!(g.d2, 125.0 * 125.0);
     let th = libm::atan2f(70.0, 500.0);
     assert!((f.m2 - th * th).abs() < 1e-6, "{}", f.m2);
