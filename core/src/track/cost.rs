@@ -6,8 +6,8 @@
 //! - vicinity  z_v = ‖x_j − x̂_i‖² / σ_v², with the motion projection
 //!   x̂_i = x_i + v_i (Section IV.C.2), computed as ‖Δ_ij − v_i‖² with
 //!   Δ_ij the displacement from i to j ([`motion_delta`]: the centroids',
-//!   or the uncut box sides' for a view the border cuts, see below). A node whose velocity is still
-//!   unknown (a target's first frame) is projected with the fleet's typical
+//!   or the uncut box sides' for a view the border cuts, see below). A
+//!   node whose velocity is still unknown (a target's first frame) is projected with the fleet's typical
 //!   velocity `v_init` and uses the wider σ_v0 instead (see `sigma`);
 //! - area      z_a = (ΔA)² / σ_a². Areas are first normalised to a common
 //!   range, `A·(z / Z_REF)²` (z = stereo depth, `TrackConfig::z_ref_mm`,
@@ -135,8 +135,9 @@ pub struct ViewFeat {
     pub pos: [f32; 2],
     /// Raw area, px.
     pub area: f32,
-    /// The box touches the frame border: the area is a lower bound
-    /// (`cut_sides != 0` for a box that holds its centroid).
+    /// The box touches the frame border: the area is a lower bound (some
+    /// side is cut; [`ViewFeat::cut_sides`] names them when the box holds
+    /// its centroid).
     pub cut: bool,
     /// The upright box `[x0, y0, x1, y1)` in the centroid's coordinates.
     pub bbox: [f32; 4],
@@ -165,8 +166,8 @@ pub const CUT_Y_MAX: u8 = 8;
 /// (the fish's head or tail, seen whole in both views); otherwise, and with
 /// `cut_aware` false (the paper), that of the centroids.
 pub fn motion_delta(a: &ViewFeat, b: &ViewFeat, cut_aware: bool) -> [f32; 2] {
+    let cut = a.cut_sides | b.cut_sides;
     let axis = |k: usize, lo: u8, hi: u8| {
-        let cut = a.cut_sides | b.cut_sides;
         let centre = b.pos[k] - a.pos[k];
         if !cut_aware || (cut & lo != 0) == (cut & hi != 0) {
             centre

@@ -250,10 +250,7 @@ pub fn cut_sides(b: &Roi, view: &Roi, k: u32) -> u8 {
 /// True when `b` comes within `k` pixels of an edge of `view` or crosses it
 /// (`b.x ≤ view.x + k`, …): a box there may be cut by the view's border.
 pub fn near_edge(b: &Roi, view: &Roi, k: u32) -> bool {
-    b.x <= view.x.saturating_add(k)
-        || b.y <= view.y.saturating_add(k)
-        || b.right().saturating_add(k) >= view.right()
-        || b.bottom().saturating_add(k) >= view.bottom()
+    cut_sides(b, view, k) != 0
 }
 
 impl TrackConfig {
@@ -917,12 +914,13 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                     && v.cx <= bbox[2]
                     && v.cy >= bbox[1]
                     && v.cy <= bbox[3];
+                let sides = cut_sides(&v.bbox, r, 2);
                 ViewFeat {
                     pos: [v.cx, v.cy],
                     area: v.area as f32,
-                    cut: near_edge(&v.bbox, r, 2),
+                    cut: sides != 0,
                     bbox,
-                    cut_sides: if sane { cut_sides(&v.bbox, r, 2) } else { 0 },
+                    cut_sides: if sane { sides } else { 0 },
                     cdf: cdf(&v.hist),
                 }
             };

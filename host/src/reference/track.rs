@@ -430,37 +430,28 @@ pub fn run(
     for (fi, obs) in frames.iter().enumerate() {
         let frame = fi as u32;
         // A box within 2 px of its view's edge (or across it) may be cut.
-        let view = |v: &fishtrack_core::track::CameraView, cam: usize| View {
-            pos: [v.cx as f64, v.cy as f64],
-            area: v.area as f64,
-            cut: {
-                let b = &v.bbox;
-                let (vx0, vy0, vx1, vy1) = views[cam];
-                b.x as u64 <= vx0 + 2
-                    || b.y as u64 <= vy0 + 2
-                    || b.x as u64 + b.w as u64 + 2 >= vx1
-                    || b.y as u64 + b.h as u64 + 2 >= vy1
-            },
-            lo: [v.bbox.x as f64, v.bbox.y as f64],
-            hi: [v.bbox.right() as f64, v.bbox.bottom() as f64],
-            // per side; none for a box that is empty or misses the centroid
-            cut_lo: {
-                let (vx0, vy0, _, _) = views[cam];
-                let ok = sane_box(v);
-                [
-                    ok && v.bbox.x as u64 <= vx0 + 2,
-                    ok && v.bbox.y as u64 <= vy0 + 2,
-                ]
-            },
-            cut_hi: {
-                let (_, _, vx1, vy1) = views[cam];
-                let ok = sane_box(v);
-                [
-                    ok && v.bbox.x as u64 + v.bbox.w as u64 + 2 >= vx1,
-                    ok && v.bbox.y as u64 + v.bbox.h as u64 + 2 >= vy1,
-                ]
-            },
-            cdf: cdf(&v.hist),
+        let view = |v: &fishtrack_core::track::CameraView, cam: usize| {
+            let b = &v.bbox;
+            let (vx0, vy0, vx1, vy1) = views[cam];
+            // per side: within 2 px of the view's side or across it
+            let lo = [b.x as u64 <= vx0 + 2, b.y as u64 <= vy0 + 2];
+            let hi = [
+                b.x as u64 + b.w as u64 + 2 >= vx1,
+                b.y as u64 + b.h as u64 + 2 >= vy1,
+            ];
+            // which end of the fish is seen: none for a box that is empty
+            // or misses the centroid
+            let ok = sane_box(v);
+            View {
+                pos: [v.cx as f64, v.cy as f64],
+                area: v.area as f64,
+                cut: lo.iter().chain(&hi).any(|&c| c),
+                lo: [b.x as f64, b.y as f64],
+                hi: [b.right() as f64, b.bottom() as f64],
+                cut_lo: lo.map(|c| ok && c),
+                cut_hi: hi.map(|c| ok && c),
+                cdf: cdf(&v.hist),
+            }
         };
         let cands: Vec<Cand> = obs
             .iter()
