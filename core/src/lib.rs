@@ -27,6 +27,7 @@ pub mod length;
 pub mod link;
 pub mod object;
 pub mod params;
+pub mod photometric;
 pub mod pipeline;
 pub mod refine;
 pub mod remap;

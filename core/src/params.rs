@@ -105,6 +105,15 @@ pub struct Params {
     /// little texture has a small variance but a clear contrast. 0 turns
     /// the rescue off.
     pub contrast_sigmas: f32,
+    /// Smallest per-pixel noise σ, grey levels, that the variance limit
+    /// of eq. (6) and the contrast rescue assume (beyond the paper;
+    /// `crate::segment::local::variance_limit`): on a frame whose noise
+    /// was smoothed away (defocus, the camera's denoising, compression)
+    /// the measured σ falls far below what an 8-bit camera's water
+    /// carries, and rules relative to it would take any smooth blob of a
+    /// few grey levels — debris, glow, marine snow — for a fish. 0 turns
+    /// the floor off.
+    pub noise_floor: f32,
     /// Whether merged objects are split where the object's pixels, raised
     /// above a threshold between ⌊τ_low⌋ and their maximum, fall into
     /// stable elongated parts (beyond the paper; touching fish,
@@ -114,6 +123,12 @@ pub struct Params {
     /// (tracking success 0.564 → 0.551 on seeds 1–8, 0.582 → 0.560 on
     /// 12–16; README, "Where FishTrack stands").
     pub split_merged: bool,
+
+    /// Whether the right view is matched to the left's grey levels before
+    /// the stereo pairing and the length are computed again on it, when
+    /// the two cameras record the fish at different grey levels (beyond
+    /// the paper; `crate::photometric`). Default on.
+    pub photometric: bool,
 
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
     /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
@@ -161,7 +176,9 @@ impl Default for Params {
             background: true,
             background_radius: 5,
             contrast_sigmas: 3.0,
+            noise_floor: 1.25,
             split_merged: false,
+            photometric: true,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,
@@ -244,6 +261,7 @@ impl Params {
             ("ellipse_scale", self.ellipse_scale),
             ("min_elongation", self.min_elongation),
             ("contrast_sigmas", self.contrast_sigmas),
+            ("noise_floor", self.noise_floor),
             ("v_ref_x", self.v_ref_x),
             ("v_ref_y", self.v_ref_y),
             ("alpha", self.alpha),
@@ -305,6 +323,11 @@ impl Params {
             "contrast_sigmas",
             (0.0..=100.0).contains(&self.contrast_sigmas),
             "0 to 100",
+        )?;
+        range(
+            "noise_floor",
+            (0.0..=50.0).contains(&self.noise_floor),
+            "0 to 50 grey levels",
         )?;
         range(
             "background_radius",

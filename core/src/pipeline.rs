@@ -39,6 +39,7 @@ use crate::length::{
 };
 use crate::object::{Object, Objects, OrientedBox};
 use crate::params::Params;
+use crate::photometric::{self, Photometric};
 use crate::segment::{segment_frame, SegmentError, RECOMMENDED_MAX_ROI_PIXELS};
 use crate::stereo::{pair_objects, PairingLimits, StereoPair, StereoPairs};
 use crate::track::{
@@ -278,6 +279,11 @@ pub struct PipelineStats {
     pub accumulators_dropped: u32,
     /// Per-track lengths beyond `F` (ignored).
     pub lengths_dropped: u32,
+    /// Frames whose right view was mapped to the left's grey levels before
+    /// pairing and measuring ([`crate::photometric`]).
+    pub photometric_mapped: u32,
+    /// Frames whose pairs added samples to the photometric estimate.
+    pub photometric_estimated: u32,
     /// The tracker's counters.
     pub track: TrackStats,
 }
@@ -335,6 +341,10 @@ pub struct Pipeline<
     history: [FrameSlot<N>; Q],
     accs: heapless::Vec<TrackAcc<F>, T>,
     stats: PipelineStats,
+    /// The photometric map in use (identity until the pool gives one).
+    photometric: Photometric,
+    /// The recent pairs' photometric samples.
+    photometric_pool: photometric::Estimator,
 }
 
 fn view_of(o: &Object) -> CameraView {
@@ -401,6 +411,8 @@ impl<
             }),
             accs: heapless::Vec::new(),
             stats: PipelineStats::default(),
+            photometric: Photometric::IDENTITY,
+            photometric_pool: photometric::Estimator::default(),
         })
     }
 
@@ -424,6 +436,13 @@ impl<
     /// The last frame's right objects.
     pub fn right_objects(&self) -> &Objects<N, R> {
         &self.right
+    }
+
+    /// The photometric map of the last frame's right view to its left
+    /// ([`crate::photometric`]; applied only when it is not within the
+    /// tolerance of the identity).
+    pub fn photometric(&self) -> Photometric {
+        self.photometric
     }
 
     /// The last frame's stereo pairs.
@@ -489,6 +508,37 @@ impl<
             &self.cfg.pairing,
         )
         .map_err(PipelineError::Image)?;
+        // the cameras' grey levels matched, then the pairs again on the
+        // mapped right view (the workspace is free after segmentation)
+        let mut right = right;
+        if params.photometric {
+            let added =
+                self.photometric_pool
+                    .add_frame(&left, &right, &self.left, &self.pairs.pairs);
+            if added > 0 {
+                self.stats.photometric_estimated =
+                    self.stats.photometric_estimated.saturating_add(1);
+            }
+            if let Some(m) = self.photometric_pool.map() {
+                self.photometric = m;
+            }
+            if !self.photometric.is_identity() {
+                right = self
+                    .photometric
+                    .apply(&right, ws)
+                    .map_err(PipelineError::Image)?;
+                self.pairs = pair_objects(
+                    &left,
+                    &right,
+                    &self.left,
+                    &self.right,
+                    &self.cfg.geometry,
+                    &self.cfg.pairing,
+                )
+                .map_err(PipelineError::Image)?;
+                self.stats.photometric_mapped = self.stats.photometric_mapped.saturating_add(1);
+            }
+        }
         stage(sink, Stage::Pair);
 
         self.lengths.clear();

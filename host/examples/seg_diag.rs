@@ -1,6 +1,6 @@
 //! Diagnostic dump (development aid): per segmented object of every left
 //! frame, its raw box and features, as CSV on stdout.
-//! `seg_diag [--no-var] [--literal] [--regions] HAUL...` (`--regions`: also
+//! `seg_diag [--no-var] [--literal] [--regions] [--noise-floor F] HAUL...` (`--regions`: also
 //! one `R,…` row per local region: raw-left centre, semi-axes, angle, τ).
 use anyhow::Result;
 use fishtrack::detect::{detection_rows, load_calibration};
@@ -16,8 +16,11 @@ fn main() -> Result<()> {
     let mut literal = false;
     let mut regions = false;
     let mut hauls = vec![];
-    for a in std::env::args().skip(1) {
+    let mut noise_floor = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
         match a.as_str() {
+            "--noise-floor" => noise_floor = args.next().and_then(|v| v.parse::<f32>().ok()),
             "--no-var" => no_var = true,
             "--literal" => literal = true,
             "--regions" => regions = true,
@@ -33,6 +36,9 @@ fn main() -> Result<()> {
         let mut p = Params::for_frame(calib.width);
         p.variance_rejection = !no_var;
         p.variance_literal = literal;
+        if let Some(f) = noise_floor {
+            p.noise_floor = f;
+        }
         let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
         let mut objs: Box<Objects<64, 16384>> = Box::default();
         for pair in &haul.frames {

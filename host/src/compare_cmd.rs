@@ -17,6 +17,7 @@ use fishtrack_core::length::wholly_inside_valid;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
 use crate::reference::compare::compare_segmentation;
+use crate::reference::photometric as rp;
 use crate::reference::stereo::{self as rs, Geometry, Gray, Limits};
 use crate::reference::track::{self as rt, Assignment, Capacities};
 use crate::track_cmd::{new_pipeline, prepare, views, TrackOptions};
@@ -61,6 +62,8 @@ pub fn run(dir: &Path) -> Result<()> {
     let (mut seg, mut pairs, mut lengths) = (Tally::default(), Tally::default(), Tally::default());
     let mut raw_lengths = Tally::default();
     let mut all_obs = Vec::new();
+    let mut photo_pool = rp::Pool::default();
+    let mut photo_map = (1.0f64, 0.0f64);
     let mut core_asg: Vec<Assignment> = Vec::new();
     let on_event = |e: &PipelineEvent, out: &mut Vec<Assignment>| {
         if let PipelineEvent::TrackFrame {
@@ -107,7 +110,26 @@ pub fn run(dir: &Path) -> Result<()> {
             w,
             h,
         };
-        let ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
+        let mut ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
+        // the photometric match (core: `photometric`), then pairs again on
+        // the mapped right view
+        let mapped;
+        let mut rg = rg;
+        if setup.params.photometric {
+            photo_pool.add_frame(&lg, &rg, &lo, &ref_pairs);
+            if let Some(m) = photo_pool.map() {
+                photo_map = m;
+            }
+            if !rp::is_identity(photo_map) {
+                mapped = rp::apply(&rg, photo_map);
+                rg = Gray {
+                    data: &mapped,
+                    w,
+                    h,
+                };
+                ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
+            }
+        }
         let reference_raw: Vec<PairLength<rs::RefLength>> = ref_pairs
             .iter()
             .map(|p| {

@@ -310,6 +310,8 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     // FISHTRACK_STEREO_DIAG=1: every right object (analysis aid)
     let mut right_diag =
         std::env::var_os("FISHTRACK_STEREO_DIAG").map(|_| String::from("frame,x,y,w,h,area\n"));
+    // the photometric map of each frame (right view to left, gain, offset)
+    let mut maps: Vec<(f32, f32)> = Vec::new();
     // read + rectify run ahead on another thread (crate::frame_source)
     crate::frame_source::for_each_rectified(&setup, &setup.haul.frames, |rp| {
         let pair = rp.pair;
@@ -338,6 +340,15 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
         .map_err(|e| {
             InputError::file(&pair.left, format!("frame {}: pipeline: {e}", pair.index))
         })?;
+        let m = pipe.photometric();
+        maps.push((m.gain, m.offset));
+        log::debug!(
+            "frame {}: right-to-left grey map gain {:.3}, offset {:.2}{}",
+            pair.index,
+            m.gain,
+            m.offset,
+            if m.is_identity() { " (identity)" } else { "" }
+        );
         if let Some(d) = right_diag.as_mut() {
             for o in pipe.right_objects().items.iter() {
                 let b = raw_box(&setup.rectifier.right, &o.bbox);
@@ -367,7 +378,7 @@ pub fn track_haul(dir: &Path, out: &Path, opts: &TrackOptions) -> Result<HaulOut
     }
     let timings: BTreeMap<&str, f64> = STAGES.iter().copied().zip(secs).collect();
     // Last: summary.json marks the output folder complete.
-    write_summary(&setup, out, &written, &stats, &timings, total)?;
+    write_summary(&setup, out, &written, &stats, &timings, total, &maps)?;
     Ok(HaulOutcome {
         fish: written.fish.len(),
         measured: written
@@ -601,7 +612,14 @@ fn write_summary(
     stats: &PipelineStats,
     timings: &BTreeMap<&str, f64>,
     total: f64,
+    maps: &[(f32, f32)],
 ) -> Result<()> {
+    let med = |mut v: Vec<f32>| -> Option<f32> {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v.get(v.len() / 2).copied()
+    };
+    let gain_median = med(maps.iter().map(|m| m.0).collect());
+    let offset_median = med(maps.iter().map(|m| m.1).collect());
     let mut lengths: Vec<f64> = w.fish.iter().filter_map(|f| f.length_mm).collect();
     lengths.sort_by(|a, b| a.total_cmp(b));
     let n = lengths.len();
@@ -679,6 +697,12 @@ fn write_summary(
             "workspace_bytes": DefaultPipeline::workspace_size(setup.width as usize, setup.height as usize),
         },
         "params": setup.params,
+        "photometric": {
+            "frames_mapped": stats.photometric_mapped,
+            "frames_estimated": stats.photometric_estimated,
+            "gain_median": gain_median,
+            "offset_median": offset_median,
+        },
         "rectification": {
             "alpha": setup.rectifier.alpha,
             "focal_px": setup.rectifier.rect.p1[(0, 0)],

@@ -62,7 +62,7 @@ pub const BP_RANGE_PERCENTILE: u32 = 99;
 /// of the noise-relative variance test: θ_V applies unchanged to frames at
 /// least this noisy and is scaled down in proportion to the measured
 /// noise variance on quieter ones.
-pub const NOISE_REF_VAR: f32 = 3.75;
+pub const NOISE_REF_VAR: f32 = 9.0;
 
 /// The limit of eq. (6). Paper-faithful (`variance_literal`): θ_V. By
 /// default (beyond the paper) `θ_V · min(1, σ_n² / NOISE_REF_VAR)`, σ_n
@@ -84,7 +84,7 @@ pub fn variance_limit(params: &Params, noise_sigma16: u32) -> f32 {
     if params.variance_literal {
         return params.var_min;
     }
-    let s = noise_sigma16 as f32 / 16.0;
+    let s = (noise_sigma16 as f32 / 16.0).max(params.noise_floor);
     params.var_min * (s * s / NOISE_REF_VAR).min(1.0)
 }
 
@@ -501,7 +501,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         let ok = !params.variance_rejection
             || var >= stats.var_limit as f64
             || (params.contrast_sigmas > 0.0
-                && contrast >= params.contrast_sigmas as f64 * w_sigma as f64);
+                && contrast
+                    >= params.contrast_sigmas as f64 * w_sigma.max(params.noise_floor) as f64);
         if !ok {
             stats.rejected_variance += 1;
         }

@@ -382,21 +382,23 @@ pub fn coarse_low(filtered: &GrayImage, p: &Params) -> (Vec<[f64; 5]>, u16, u16)
     (out, t_low, t_high)
 }
 
-/// Robust white-noise σ of `img` in 1/16 grey levels (core:
-/// `noise::noise_sigma16`): d = a − b − c + e over disjoint 2 × 2 blocks of
-/// every `NOISE_BLOCK_ROW_STEP`-th block row,
+/// Robust per-pixel noise σ of `img` in 1/16 grey levels (core:
+/// `noise::noise_sigma16`): d = p(x, y) − p(x + L, y) − p(x, y + L) +
+/// p(x + L, y + L), L = `NOISE_LAG`, at rows y = 0, 2L, … and columns
+/// x = 0, L, … (all four pixels inside the frame),
 /// σ = 1.4826 · median|d| / 2 with the median of the integer |d| taken as
 /// the grouped-data median (values of k spread over [k − ½, k + ½), 0
 /// over [0, ½)).
 pub fn noise_sigma16(img: &GrayImage) -> u32 {
     let (w, h) = img.dimensions();
     let px = |x: u32, y: u32| img.get_pixel(x, y).0[0] as i64;
+    let lag = fishtrack_core::noise::NOISE_LAG as u32;
     let mut d: Vec<u64> = Vec::new();
-    let step = fishtrack_core::noise::NOISE_BLOCK_ROW_STEP as u32;
-    for by in (0..h / 2).filter(|by| by % step == 0) {
-        for bx in 0..w / 2 {
-            let (x, y) = (2 * bx, 2 * by);
-            d.push((px(x, y) - px(x + 1, y) - px(x, y + 1) + px(x + 1, y + 1)).unsigned_abs());
+    for y in (0..h).step_by(2 * lag as usize).filter(|y| y + lag < h) {
+        for x in (0..w).step_by(lag as usize).filter(|x| x + lag < w) {
+            d.push(
+                (px(x, y) - px(x + lag, y) - px(x, y + lag) + px(x + lag, y + lag)).unsigned_abs(),
+            );
         }
     }
     if d.is_empty() {
@@ -436,7 +438,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
     let var_limit = if p.variance_literal {
         p.var_min as f64
     } else {
-        let s = noise16 as f64 / 16.0;
+        let s = (noise16 as f64 / 16.0).max(p.noise_floor as f64);
         p.var_min as f64 * (s * s / fishtrack_core::segment::local::NOISE_REF_VAR as f64).min(1.0)
     };
     let mut res = RefResult {
@@ -634,8 +636,9 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
             }
             let (_, var) = mean_var(&roi_img, &comp);
             let (seen_mean, _) = mean_var(&seen, &comp);
-            let contrast_ok =
-                p.contrast_sigmas > 0.0 && seen_mean - w_med >= p.contrast_sigmas as f64 * w_sigma;
+            let contrast_ok = p.contrast_sigmas > 0.0
+                && seen_mean - w_med
+                    >= p.contrast_sigmas as f64 * w_sigma.max(p.noise_floor as f64);
             if p.variance_rejection && var < var_limit && !contrast_ok {
                 continue;
             }

@@ -1,0 +1,149 @@
+//! Float reference of the photometric match of the right view to the left
+//! (`fishtrack_core::photometric`, beyond the paper): per stereo pair, the
+//! ratio of the fish's contrasts in the two views over the left mask and
+//! the same pixels shifted by the pair's disparity, each against the
+//! median of a ring around the box; the map `l = g·r + o` is the medians
+//! over the last `POOL` samples; the right frame is mapped through
+//! `round(g·r + o)` when the map is not within the tolerances of the
+//! identity. Written independently in `f64` with a `VecDeque` pool.
+
+use std::collections::VecDeque;
+
+use fishtrack_core::photometric::{
+    GAIN_RANGE, GAIN_TOLERANCE, MIN_CONTRAST, MIN_SAMPLES, OFFSET_TOLERANCE, POOL,
+};
+
+use super::stereo::{Gray, RefObject, RefPair};
+use crate::stats::median;
+
+/// The recent pairs' `(gain, ring_L, ring_R)` samples.
+#[derive(Debug, Default, Clone)]
+pub struct Pool {
+    samples: VecDeque<(f64, f64, f64)>,
+}
+
+/// Median and 1.4826·MAD of up to 512 pixels on the border of `b` grown by
+/// `margin` (clipped), walked top, bottom, left, right with an even step.
+fn ring(img: &Gray, b: (i64, i64, i64, i64), margin: i64) -> (f64, f64) {
+    let (x0, y0) = ((b.0 - margin).max(0), (b.1 - margin).max(0));
+    let x1 = (b.0 + b.2 + margin).min(img.w as i64);
+    let y1 = (b.1 + b.3 + margin).min(img.h as i64);
+    let (w, h) = (x1 - x0, y1 - y0);
+    if w <= 0 || h <= 0 {
+        return (0.0, 0.0);
+    }
+    let per = 2 * (w + h);
+    let step = ((per + 511) / 512).max(1);
+    let mut v: Vec<f64> = (0..per)
+        .step_by(step as usize)
+        .take(512)
+        .map(|k| {
+            if k < w {
+                (x0 + k, y0)
+            } else if k < 2 * w {
+                (x0 + k - w, y1 - 1)
+            } else if k < 2 * w + h {
+                (x0, y0 + k - 2 * w)
+            } else {
+                (x1 - 1, y0 + k - 2 * w - h)
+            }
+        })
+        .map(|(x, y)| img.data[y as usize * img.w + x as usize] as f64)
+        .collect();
+    v.sort_by(|a, b| a.total_cmp(b));
+    let med = v[v.len() / 2];
+    let mut dev: Vec<f64> = v.iter().map(|p| (p - med).abs()).collect();
+    dev.sort_by(|a, b| a.total_cmp(b));
+    (med, 1.4826 * dev[dev.len() / 2])
+}
+
+/// One pair's `(gain, ring_L, ring_R)`, or `None` when the fish is not
+/// measurably brighter than its ring in both views.
+fn sample(l: &Gray, r: &Gray, lo: &RefObject, p: &RefPair) -> Option<(f64, f64, f64)> {
+    if !p.d_o.is_finite() || p.d_o.abs() > r.w as f64 {
+        return None;
+    }
+    let d = p.d_o.round() as i64;
+    let (mut sl, mut sr, mut n) = (0.0, 0.0, 0usize);
+    for &(x, y) in &lo.pixels {
+        let xr = x - d;
+        if xr < 0 || xr >= r.w as i64 || y < 0 || y as usize >= r.h.min(l.h) {
+            continue;
+        }
+        sl += l.data[y as usize * l.w + x as usize] as f64;
+        sr += r.data[y as usize * r.w + xr as usize] as f64;
+        n += 1;
+    }
+    if n == 0 {
+        return None;
+    }
+    let (ml, mr) = (sl / n as f64, sr / n as f64);
+    let b = lo.bbox;
+    if b.0 - d < 0 || b.0 - d + b.2 > r.w as i64 {
+        return None;
+    }
+    let margin = (b.3 / 4).max(4);
+    let (bl, sgl) = ring(l, b, margin);
+    let (br, sgr) = ring(r, (b.0 - d, b.1, b.2, b.3), margin);
+    let (cl, cr) = (ml - bl, mr - br);
+    let enough = |c: f64, s: f64| c >= MIN_CONTRAST as f64 && c >= 3.0 * s;
+    (enough(cl, sgl) && enough(cr, sgr)).then(|| (cl / cr, bl, br))
+}
+
+impl Pool {
+    /// Adds the samples of one frame's pairs (`left` the frame's left
+    /// objects); returns how many.
+    pub fn add_frame(
+        &mut self,
+        l: &Gray,
+        r: &Gray,
+        left: &[RefObject],
+        pairs: &[RefPair],
+    ) -> usize {
+        let mut n = 0;
+        for p in pairs {
+            if let Some(s) = left.get(p.left).and_then(|lo| sample(l, r, lo, p)) {
+                if self.samples.len() == POOL {
+                    self.samples.pop_front();
+                }
+                self.samples.push_back(s);
+                n += 1;
+            }
+        }
+        n
+    }
+
+    /// `(gain, offset)` of the pool, `None` with too few samples or a gain
+    /// outside the range.
+    pub fn map(&self) -> Option<(f64, f64)> {
+        if self.samples.len() < MIN_SAMPLES {
+            return None;
+        }
+        let g = median(&mut self.samples.iter().map(|s| s.0).collect::<Vec<_>>());
+        if g < GAIN_RANGE.0 as f64 || g > GAIN_RANGE.1 as f64 {
+            return None;
+        }
+        let o = median(
+            &mut self
+                .samples
+                .iter()
+                .map(|s| s.1 - g * s.2)
+                .collect::<Vec<_>>(),
+        );
+        Some((g, o))
+    }
+}
+
+/// Whether `(gain, offset)` counts as matched views.
+pub fn is_identity((g, o): (f64, f64)) -> bool {
+    (g - 1.0).abs() <= GAIN_TOLERANCE as f64
+        && (o + (g - 1.0) * 128.0).abs() <= OFFSET_TOLERANCE as f64
+}
+
+/// The right frame mapped through `round(g·r + o)`, clamped to 0–255.
+pub fn apply(r: &Gray, (g, o): (f64, f64)) -> Vec<u8> {
+    r.data
+        .iter()
+        .map(|&p| (g * p as f64 + o).round().clamp(0.0, 255.0) as u8)
+        .collect()
+}
