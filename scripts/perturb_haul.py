@@ -87,6 +87,22 @@ def fpn(img, rng, ctx):
     return clip8(out)
 
 
+def hot(img, rng, ctx):
+    """Hot and warm pixels per camera, the same in every frame: 0.02 % of
+    the sensor at 80–255 (no column pattern)."""
+    _, hot = ctx["fpn"]
+    out = img.copy()
+    out[hot] = np.maximum(out[hot], ctx["hot_level"])
+    return clip8(out)
+
+
+def columns(img, rng, ctx):
+    """Column offsets of σ 2 grey levels per camera, the same in every
+    frame (a CMOS sensor's column amplifiers; no hot pixels)."""
+    col, _ = ctx["fpn"]
+    return clip8(img + col[None, :])
+
+
 def vignette(img, rng, ctx):
     """Strong lens fall-off: × (1 − 0.6 r²), r = 1 at the corners."""
     h, w = img.shape
@@ -96,7 +112,7 @@ def vignette(img, rng, ctx):
 
 
 PERTURBATIONS = {
-    f.__name__: f for f in (dark, lift, noise, blur, jpeg, gamma, flicker, gainlr, strobe, fpn, vignette)
+    f.__name__: f for f in (dark, lift, noise, blur, jpeg, gamma, flicker, gainlr, strobe, fpn, hot, columns, vignette)
 }
 
 
@@ -118,10 +134,11 @@ def perturb(src, dst, kind, seed):
         names = frames(os.path.join(src, cam))
         rng = np.random.default_rng([seed, cam_i])
         ctx = {"camera": cam, "seed": seed}
-        if kind == "fpn":
+        if kind in ("fpn", "hot", "columns"):
             first = cv2.imread(os.path.join(src, cam, names[0]), cv2.IMREAD_GRAYSCALE)
             h, w = first.shape
             ctx["fpn"] = (rng.normal(0.0, 2.0, w), rng.random((h, w)) < 2e-4)
+            ctx["hot_level"] = rng.uniform(80.0, 255.0, int(ctx["fpn"][1].sum()))
         for fi, name in enumerate(names):
             ctx["frame"] = fi
             img = cv2.imread(os.path.join(src, cam, name), cv2.IMREAD_GRAYSCALE)
