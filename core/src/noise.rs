@@ -27,7 +27,7 @@
 //!
 //! The samples: rows `y = 2L·j` (with row `y + L`), columns `x = L·i`
 //! (with `x + L`): 131 072 of them on a 2048² frame, so the median moves
-//! by a fraction of a per cent; about 0.3 instructions per pixel.
+//! by a fraction of a per cent; 0.4 instructions per pixel.
 //!
 //! Integer arithmetic per pixel; no allocation; never panics.
 
@@ -84,42 +84,42 @@ fn sigma16_of(hist: &[u32], total: u64) -> Option<u32> {
 /// Adds the histogram of `|d|` (exact: `|d| ≤ 510`) over the samples of
 /// the module documentation to `hist`; returns the number of samples.
 ///
-/// Per sample row pair, the row difference `u = p(·, y) − p(·, y + L)` is
-/// taken slice-wise in chunks (vectorised), then `d = u(x) − u(x + L)`
-/// at every L-th column.
+/// Per sample row pair, only every L-th column is read: the row difference
+/// `u(x) = p(x, y) − p(x, y + L)` at `x = 0, L, …`, and `d = u(x) −
+/// u(x + L)` of consecutive ones (a quarter of the pixels of an eighth of
+/// the rows: under 0.5 instructions per pixel of the frame).
 fn noise_hist(img: ImageView<'_>, hist: &mut [u32; 512]) -> u64 {
     const L: usize = NOISE_LAG;
-    const CHUNK: usize = 512;
     let (w, h) = (img.width(), img.height());
     if w <= L || h <= L {
         return 0;
     }
-    let mut u = [0i16; CHUNK + L];
+    // sample columns x = 0, L, …, with x + L ≤ w − 1: n of them, n + 1 u's
+    let n = (w - 1) / L;
     let mut total = 0u64;
     for y in (0..h - L).step_by(2 * L) {
         let (ra, rb) = (img.row(y), img.row(y + L));
-        // sample columns x = 0, L, … with x + L < w
-        let mut x0 = 0usize;
-        while x0 + L < w {
-            // u over x0 .. x0 + n + L, samples at x0, x0 + L, …, < x0 + n
-            let n = CHUNK.min(w - L - x0);
-            let (Some(pa), Some(pb)) = (ra.get(x0..x0 + n + L), rb.get(x0..x0 + n + L)) else {
+        // u at x = 0, L, …, nL (< w): the first pixel of each L-chunk,
+        // the last chunk possibly short
+        let (Some(ra), Some(rb)) = (ra.get(..n * L + 1), rb.get(..n * L + 1)) else {
+            continue;
+        };
+        let (Some(&a0), Some(&b0)) = (ra.first(), rb.first()) else {
+            continue;
+        };
+        let mut prev = a0 as i16 - b0 as i16;
+        // the L-chunks of the row from column L start at L, 2L, …, nL
+        let (ra, rb) = (ra.get(L..).unwrap_or(&[]), rb.get(L..).unwrap_or(&[]));
+        for (ca, cb) in ra.chunks(L).zip(rb.chunks(L)) {
+            let (Some(&a), Some(&b)) = (ca.first(), cb.first()) else {
                 break;
             };
-            let u = &mut u[..n + L];
-            for ((o, &a), &b) in u.iter_mut().zip(pa).zip(pb) {
-                *o = a as i16 - b as i16;
+            let u = a as i16 - b as i16;
+            if let Some(c) = hist.get_mut((prev - u).unsigned_abs() as usize) {
+                *c = c.wrapping_add(1);
             }
-            // pairs (u(x), u(x + L)) for x = 0, L, … < n
-            for (&a, &b) in u.iter().zip(u.get(L..).unwrap_or(&[])).step_by(L) {
-                if let Some(c) = hist.get_mut((a - b).unsigned_abs() as usize) {
-                    *c = c.wrapping_add(1);
-                }
-                total += 1;
-            }
-            // CHUNK is a multiple of L, so the next chunk's first column
-            // continues the sampling grid
-            x0 += n;
+            total += 1;
+            prev = u;
         }
     }
     total
