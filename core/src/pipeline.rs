@@ -4,6 +4,7 @@
 //! ```text
 //! rectified left ─► segment (III) ─► left objects ─┐
 //! rectified right ─► segment (III) ─► right objects ┴► stereo pairing (IV.A)
+//!     [─► right view mapped to the left's grey levels, pairing again]
 //!     ─► 3-D length per pair (IV.D) ─► observations ─► matching cost (IV.B)
 //!     + multi-target Viterbi data association (IV.C) ─► tracks ─► fish
 //!        (count + per-track length: median of the wholly-inside frames)
@@ -19,13 +20,21 @@
 //! stages without the core owning a clock) and the frame's counters.
 //! [`Pipeline::finish`] closes the remaining tracks at the end of a haul.
 //!
+//! The bracketed step is beyond the paper ([`crate::photometric`],
+//! `Params::photometric`): when the stereo pairs of the recent frames say
+//! the two cameras record the fish at different grey levels, the right
+//! frame is mapped through a look-up table into the workspace (free once
+//! both views are segmented) and the pairing and the lengths use the
+//! mapped view.
+//!
 //! # Memory
 //! Everything is inline: `Pipeline<N, R, T, D, K, H, Q, F>` holds the left
 //! and right [`Objects<N, R>`], the frame's pairs, lengths and
 //! observations, the [`Tracker<T, D, K, H, N>`], a ring of the last `Q`
 //! frames' per-observation results (committed track frames arrive up to `D`
-//! frames late, so `Q > D` is required), and a table of `T` per-track
-//! [`LengthAccumulator<F>`]s keyed by track id. The segmentation scratch is
+//! frames late, so `Q > D` is required), a table of `T` per-track
+//! [`LengthAccumulator<F>`]s keyed by track id, and the photometric pool
+//! ([`photometric::POOL`] samples). The segmentation scratch is
 //! the caller's `ws` of [`Pipeline::workspace_size`] bytes. Capacity
 //! overflow anywhere is counted in [`PipelineStats`], never fatal.
 //! `size_of::<DefaultPipeline>()` is checked to stay ≤ 512 KiB.
