@@ -346,7 +346,7 @@ pub fn median_mad_u16(values: &[u16], hist: &mut [u32], dev: &mut [u32]) -> (u32
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use proptest::prelude::*;
 
@@ -395,7 +395,7 @@ mod tests {
     }
 
     /// xorshift pixels of `w × h`, each the top bits of the state above `shift`.
-    fn pixels(w: usize, h: usize, seed: u64, shift: u32) -> Vec<u64> {
+    pub(crate) fn pixels(w: usize, h: usize, seed: u64, shift: u32) -> Vec<u64> {
         let mut s = seed | 1;
         (0..w * h)
             .map(|_| {

@@ -152,14 +152,9 @@ mod tests {
     }
 
     fn xorshift_image(w: usize, h: usize, seed: u64) -> Vec<u8> {
-        let mut s = seed | 1;
-        (0..w * h)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 24) as u8
-            })
+        crate::lowres::tests::pixels(w, h, seed, 24)
+            .into_iter()
+            .map(|v| v as u8)
             .collect()
     }
 

@@ -469,6 +469,23 @@ impl<
         &self.observations
     }
 
+    /// Stereo pairs of this frame's objects on the views `left`, `right`.
+    fn pair(
+        &self,
+        left: &ImageView<'_>,
+        right: &ImageView<'_>,
+    ) -> Result<StereoPairs<N>, PipelineError> {
+        pair_objects(
+            left,
+            right,
+            &self.left,
+            &self.right,
+            &self.cfg.geometry,
+            &self.cfg.pairing,
+        )
+        .map_err(PipelineError::Image)
+    }
+
     /// Runs every stage on one rectified frame pair (see the module
     /// documentation). `frame` must increase from call to call.
     pub fn process_frame(
@@ -508,15 +525,7 @@ impl<
             .right_objects_dropped
             .saturating_add(self.right.dropped);
 
-        self.pairs = pair_objects(
-            &left,
-            &right,
-            &self.left,
-            &self.right,
-            &self.cfg.geometry,
-            &self.cfg.pairing,
-        )
-        .map_err(PipelineError::Image)?;
+        self.pairs = self.pair(&left, &right)?;
         // the cameras' grey levels matched, then the pairs again on the
         // mapped right view (the workspace is free after segmentation)
         let mut right = right;
@@ -536,15 +545,7 @@ impl<
                     .photometric
                     .apply(&right, ws)
                     .map_err(PipelineError::Image)?;
-                self.pairs = pair_objects(
-                    &left,
-                    &right,
-                    &self.left,
-                    &self.right,
-                    &self.cfg.geometry,
-                    &self.cfg.pairing,
-                )
-                .map_err(PipelineError::Image)?;
+                self.pairs = self.pair(&left, &right)?;
                 self.stats.photometric_mapped = self.stats.photometric_mapped.saturating_add(1);
             }
         }

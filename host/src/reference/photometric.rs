@@ -5,7 +5,9 @@
 //! median of a ring around the box; the map `l = g·r + o` is the medians
 //! over the last `POOL` samples; the right frame is mapped through
 //! `round(g·r + o)` when the map is not within the tolerances of the
-//! identity. Written independently in `f64` with a `VecDeque` pool.
+//! identity. Written independently in `f64` with a `VecDeque` pool; the
+//! ring is the reference's own (`stereo::background`, the one its length
+//! stage uses).
 
 use std::collections::VecDeque;
 
@@ -13,48 +15,13 @@ use fishtrack_core::photometric::{
     GAIN_RANGE, GAIN_TOLERANCE, MIN_CONTRAST, MIN_SAMPLES, OFFSET_TOLERANCE, POOL,
 };
 
-use super::stereo::{Gray, RefObject, RefPair};
+use super::stereo::{background, Gray, RefObject, RefPair};
 use crate::stats::median;
 
 /// The recent pairs' `(gain, ring_L, ring_R)` samples.
 #[derive(Debug, Default, Clone)]
 pub struct Pool {
     samples: VecDeque<(f64, f64, f64)>,
-}
-
-/// Median and 1.4826·MAD of up to 512 pixels on the border of `b` grown by
-/// `margin` (clipped), walked top, bottom, left, right with an even step.
-fn ring(img: &Gray, b: (i64, i64, i64, i64), margin: i64) -> (f64, f64) {
-    let (x0, y0) = ((b.0 - margin).max(0), (b.1 - margin).max(0));
-    let x1 = (b.0 + b.2 + margin).min(img.w as i64);
-    let y1 = (b.1 + b.3 + margin).min(img.h as i64);
-    let (w, h) = (x1 - x0, y1 - y0);
-    if w <= 0 || h <= 0 {
-        return (0.0, 0.0);
-    }
-    let per = 2 * (w + h);
-    let step = ((per + 511) / 512).max(1);
-    let mut v: Vec<f64> = (0..per)
-        .step_by(step as usize)
-        .take(512)
-        .map(|k| {
-            if k < w {
-                (x0 + k, y0)
-            } else if k < 2 * w {
-                (x0 + k - w, y1 - 1)
-            } else if k < 2 * w + h {
-                (x0, y0 + k - 2 * w)
-            } else {
-                (x1 - 1, y0 + k - 2 * w - h)
-            }
-        })
-        .map(|(x, y)| img.data[y as usize * img.w + x as usize] as f64)
-        .collect();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let med = v[v.len() / 2];
-    let mut dev: Vec<f64> = v.iter().map(|p| (p - med).abs()).collect();
-    dev.sort_by(|a, b| a.total_cmp(b));
-    (med, 1.4826 * dev[dev.len() / 2])
 }
 
 /// One pair's `(gain, ring_L, ring_R)`, or `None` when the fish is not
@@ -83,8 +50,8 @@ fn sample(l: &Gray, r: &Gray, lo: &RefObject, p: &RefPair) -> Option<(f64, f64, 
         return None;
     }
     let margin = (b.3 / 4).max(4);
-    let (bl, sgl) = ring(l, b, margin);
-    let (br, sgr) = ring(r, (b.0 - d, b.1, b.2, b.3), margin);
+    let (bl, sgl) = background(l, b, margin);
+    let (br, sgr) = background(r, (b.0 - d, b.1, b.2, b.3), margin);
     let (cl, cr) = (ml - bl, mr - br);
     let enough = |c: f64, s: f64| c >= MIN_CONTRAST as f64 && c >= 3.0 * s;
     (enough(cl, sgl) && enough(cr, sgr)).then(|| (cl / cr, bl, br))

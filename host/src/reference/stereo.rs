@@ -485,7 +485,7 @@ fn box_mean(img: &Gray, x: i64, y: i64) -> f64 {
 }
 
 /// Background median and robust SD on a ring around the box.
-fn background(img: &Gray, b: (i64, i64, i64, i64), margin: i64) -> (f64, f64) {
+pub(crate) fn background(img: &Gray, b: (i64, i64, i64, i64), margin: i64) -> (f64, f64) {
     let x0 = (b.0 - margin).max(0);
     let y0 = (b.1 - margin).max(0);
     let x1 = (b.0 + b.2 + margin).min(img.w as i64);
