@@ -49,8 +49,8 @@ pub fn noise_sigma16(img: ImageView<'_>) -> u32 {
     sigma16_of(&hist, total).unwrap_or(0)
 }
 
-/// `σ` (sixteenths) from the histogram `hist` of |d| (bins 0, 1, …; the
-/// blocks beyond its last bin only counted in `total`): `None` when the
+/// `σ` (sixteenths) from the histogram `hist` of |d| (bins 0, 1, …; any
+/// samples beyond its last bin only counted in `total`): `None` when the
 /// median is beyond the last bin.
 fn sigma16_of(hist: &[u32], total: u64) -> Option<u32> {
     // interpolated median of |d|: bin k covers [k − ½, k + ½) (bin 0: [0, ½))
