@@ -393,7 +393,9 @@ pub fn end_square_sad(
     Some(sum as f32 / n as f32)
 }
 
-fn median_in_place(v: &mut [f32]) -> Option<f32> {
+/// Median of `v` (sorted in place; the mean of the middle two for an even
+/// length), `None` when empty.
+pub(crate) fn median_in_place(v: &mut [f32]) -> Option<f32> {
     if v.is_empty() {
         return None;
     }

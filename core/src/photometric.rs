@@ -36,6 +36,7 @@
 
 use crate::error::ImageError;
 use crate::image::{ImageView, Roi};
+use crate::length::median_in_place;
 use crate::object::Objects;
 use crate::snake::background_level;
 use crate::stereo::StereoPair;
@@ -198,21 +199,6 @@ fn pair_sample<const N: usize, const R: usize>(
     (enough(cl, sl) && enough(cr, sr)).then(|| (cl / cr, bl, br))
 }
 
-/// Median of `v` (sorted in place), `None` when empty.
-fn median(v: &mut [f32]) -> Option<f32> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_unstable_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    let m = if n % 2 == 1 {
-        *v.get(n / 2)?
-    } else {
-        0.5 * (*v.get(n / 2 - 1)? + *v.get(n / 2)?)
-    };
-    Some(m)
-}
-
 /// The map from the stereo pairs of the recent frames (see the module
 /// documentation): each frame adds its pairs' samples to a pool of the last
 /// [`POOL`], and the map is the pool's medians.
@@ -278,14 +264,14 @@ impl Estimator {
         for (d, s) in v.iter_mut().zip(self.samples.iter()).take(n) {
             *d = s.0;
         }
-        let gain = median(v.get_mut(..n)?)?;
+        let gain = median_in_place(v.get_mut(..n)?)?;
         if !(GAIN_RANGE.0..=GAIN_RANGE.1).contains(&gain) {
             return None;
         }
         for (d, s) in v.iter_mut().zip(self.samples.iter()).take(n) {
             *d = s.1 - gain * s.2;
         }
-        let offset = median(v.get_mut(..n)?)?;
+        let offset = median_in_place(v.get_mut(..n)?)?;
         Some(Photometric { gain, offset })
     }
 }

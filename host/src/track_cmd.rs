@@ -614,12 +614,13 @@ fn write_summary(
     total: f64,
     maps: &[(f32, f32)],
 ) -> Result<()> {
-    let med = |mut v: Vec<f32>| -> Option<f32> {
-        v.sort_by(|a, b| a.total_cmp(b));
-        v.get(v.len() / 2).copied()
+    let med = |f: fn(&(f32, f32)) -> f32| {
+        (!maps.is_empty()).then(|| {
+            crate::stats::median(&mut maps.iter().map(|m| f(m) as f64).collect::<Vec<_>>())
+        })
     };
-    let gain_median = med(maps.iter().map(|m| m.0).collect());
-    let offset_median = med(maps.iter().map(|m| m.1).collect());
+    let gain_median = med(|m| m.0);
+    let offset_median = med(|m| m.1);
     let mut lengths: Vec<f64> = w.fish.iter().filter_map(|f| f.length_mm).collect();
     lengths.sort_by(|a, b| a.total_cmp(b));
     let n = lengths.len();
