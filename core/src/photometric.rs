@@ -32,6 +32,22 @@
 //! measures again on it; otherwise nothing changes (a matched rig's
 //! outputs are those of the paper's pipeline).
 //!
+//! **Flash to flash** (session 10). A mismatch can also change with every
+//! flash: each camera's exposure catches a different part of the strobe's
+//! pulse, or each has its own strobe (`scripts/perturb_haul.py flicker`:
+//! each view × 0.65–1.35 per frame lost 35 of 117 measured fish-frames and
+//! 16 of 67 tracked fish on seeds 1–4). The pool of fish samples follows
+//! the rig, not one flash, and one frame seldom has the five pairs a map
+//! needs. The water does: [`frame_level`] is a trimmed mean of the water's
+//! grey level in each view (sampled pixels between their 10th and 60th
+//! percentiles: below the fish, the mesh and the glow), and the ratio of
+//! the two views' levels against its median over the last [`POOL`] frames
+//! is this flash's factor `q` ([`Estimator::add_levels`]; the views' water
+//! differs by a constant factor through backscatter, which the median
+//! removes). The fish samples are pooled as if the right view were
+//! `q · r`, and the frame's map is `l = g · q · r + o`. A steady rig gives
+//! `q` within a few per cent of 1 and leaves the map as it was.
+//!
 //! Integer work per pixel (one table look-up); no allocation; never panics.
 
 use crate::error::ImageError;
@@ -63,6 +79,40 @@ pub const GAIN_TOLERANCE: f32 = 0.08;
 pub const OFFSET_TOLERANCE: f32 = 6.0;
 /// The gains a map may have: a wider mismatch is not a camera pair.
 pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
+/// Rows and columns between the pixels [`frame_level`] samples.
+pub const LEVEL_STEP: (usize, usize) = (16, 8);
+/// The sampled pixels' rank range, in tenths, that [`frame_level`]
+/// averages: the water below the fish, mesh and glow, above the darkest
+/// corners.
+pub const LEVEL_TRIM: (u64, u64) = (1, 6);
+
+/// The water's grey level of a view: the mean of the pixels sampled every
+/// [`LEVEL_STEP`] rows and columns whose ranks lie between the
+/// [`LEVEL_TRIM`] tenths (bins counted in part at the two ends, so the
+/// mean moves smoothly with the frame). `None` for an empty view or black
+/// water.
+pub fn frame_level(img: &ImageView<'_>) -> Option<f32> {
+    let mut hist = [0u64; 256];
+    for y in (0..img.height()).step_by(LEVEL_STEP.0) {
+        for &p in img.row(y).iter().step_by(LEVEL_STEP.1) {
+            if let Some(c) = hist.get_mut(p as usize) {
+                *c += 1;
+            }
+        }
+    }
+    let n: u64 = hist.iter().sum();
+    let (lo, hi) = (n * LEVEL_TRIM.0 / 10, n * LEVEL_TRIM.1 / 10);
+    let (mut below, mut sum, mut cnt) = (0u64, 0u64, 0u64);
+    for (v, &c) in hist.iter().enumerate() {
+        let (a, b) = (below.max(lo), (below + c).min(hi));
+        if b > a {
+            sum += (b - a) * v as u64;
+            cnt += b - a;
+        }
+        below += c;
+    }
+    (cnt > 0 && sum > 0).then(|| sum as f32 / cnt as f32)
+}
 
 /// The grey-level map `l = gain · r + offset` from the right view to the
 /// left.
@@ -104,6 +154,14 @@ impl Photometric {
             *v = micromath::F32(x).round().0.clamp(0.0, 255.0) as u8;
         }
         t
+    }
+
+    /// This map applied after a flash factor `q`: `l = g · q · r + o`.
+    pub fn after_flash(&self, q: f32) -> Photometric {
+        Photometric {
+            gain: self.gain * q,
+            offset: self.offset,
+        }
     }
 
     /// Writes `src` mapped through [`Photometric::lut`] into `dst` (packed,
@@ -204,10 +262,15 @@ fn pair_sample<const N: usize, const R: usize>(
 /// [`POOL`], and the map is the pool's medians.
 #[derive(Debug, Clone, Copy)]
 pub struct Estimator {
-    /// `(gain, bg_L, bg_R)` samples, a ring.
+    /// `(gain, bg_L, bg_R)` samples, a ring, as if the right view were
+    /// `q · r` (the frame's flash factor).
     samples: [(f32, f32, f32); POOL],
     len: usize,
     next: usize,
+    /// The recent frames' water level ratios `level_L / level_R`, a ring.
+    ratios: [f32; POOL],
+    ratios_len: usize,
+    ratios_next: usize,
 }
 
 impl Default for Estimator {
@@ -216,24 +279,56 @@ impl Default for Estimator {
             samples: [(0.0, 0.0, 0.0); POOL],
             len: 0,
             next: 0,
+            ratios: [0.0; POOL],
+            ratios_len: 0,
+            ratios_next: 0,
         }
     }
 }
 
 impl Estimator {
-    /// Adds the samples of one frame's pairs; returns how many it added.
+    /// Adds one frame's water level ratio and returns its flash factor
+    /// `q`: the ratio over the median ratio of the last [`POOL`] frames
+    /// (this one included). 1 when a view has no level or `q` leaves
+    /// [`GAIN_RANGE`] (not a flash).
+    pub fn add_levels(&mut self, left_img: &ImageView<'_>, right_img: &ImageView<'_>) -> f32 {
+        let (Some(l), Some(r)) = (frame_level(left_img), frame_level(right_img)) else {
+            return 1.0;
+        };
+        let ratio = l / r;
+        if let Some(slot) = self.ratios.get_mut(self.ratios_next) {
+            *slot = ratio;
+        }
+        self.ratios_next = (self.ratios_next + 1) % POOL;
+        self.ratios_len = (self.ratios_len + 1).min(POOL);
+        let mut v = self.ratios;
+        let reference = v
+            .get_mut(..self.ratios_len)
+            .and_then(median_in_place)
+            .unwrap_or(ratio);
+        let q = ratio / reference;
+        if q.is_finite() && (GAIN_RANGE.0..=GAIN_RANGE.1).contains(&q) {
+            q
+        } else {
+            1.0
+        }
+    }
+
+    /// Adds the samples of one frame's pairs, the frame's flash factor `q`
+    /// ([`Estimator::add_levels`]) taken out; returns how many it added.
     pub fn add_frame<const N: usize, const R: usize>(
         &mut self,
         left_img: &ImageView<'_>,
         right_img: &ImageView<'_>,
         left: &Objects<N, R>,
         pairs: &[StereoPair],
+        q: f32,
     ) -> usize {
         let mut added = 0;
         for p in pairs.iter() {
-            if let Some(v) = pair_sample(left_img, right_img, left, p) {
+            if let Some((g, bl, br)) = pair_sample(left_img, right_img, left, p) {
                 if let Some(slot) = self.samples.get_mut(self.next) {
-                    *slot = v;
+                    *slot = (g / q, bl, br * q);
                 }
                 self.next = (self.next + 1) % POOL;
                 self.len = (self.len + 1).min(POOL);
@@ -253,8 +348,8 @@ impl Estimator {
         self.len == 0
     }
 
-    /// The pool's map: `None` with fewer than [`MIN_SAMPLES`] samples or a
-    /// median gain outside [`GAIN_RANGE`].
+    /// The pool's map of `q · r` to the left view: `None` with fewer than
+    /// [`MIN_SAMPLES`] samples or a median gain outside [`GAIN_RANGE`].
     pub fn map(&self) -> Option<Photometric> {
         let n = self.len;
         if n < MIN_SAMPLES {
@@ -359,9 +454,9 @@ mod tests {
         let objs = objects(&boxes);
         let mut e = Estimator::default();
         // three samples: not yet a map; two frames: six
-        assert_eq!(e.add_frame(&lv, &rv, &objs, &pairs(3)), 3);
+        assert_eq!(e.add_frame(&lv, &rv, &objs, &pairs(3), 1.0), 3);
         assert!(e.map().is_none());
-        e.add_frame(&lv, &rv, &objs, &pairs(3));
+        e.add_frame(&lv, &rv, &objs, &pairs(3), 1.0);
         let m = e.map().unwrap();
         assert!((m.gain - 1.3).abs() < 0.03, "{m:?}");
         assert!((m.offset - 3.0).abs() < 1.5, "{m:?}");
@@ -387,7 +482,7 @@ mod tests {
         let objs = objects(&boxes);
         let mut e = Estimator::default();
         for _ in 0..3 {
-            e.add_frame(&lv, &lv, &objs, &pairs(2));
+            e.add_frame(&lv, &lv, &objs, &pairs(2), 1.0);
         }
         let m = e.map().unwrap();
         assert!(m.is_identity(), "{m:?}");
@@ -405,16 +500,16 @@ mod tests {
         let mut e = Estimator::default();
         for _ in 0..10 {
             // only the bright fish gives a sample
-            assert_eq!(e.add_frame(&lv, &lv, &objs, &pairs(2)), 1);
+            assert_eq!(e.add_frame(&lv, &lv, &objs, &pairs(2), 1.0), 1);
         }
         assert_eq!(e.len(), 10);
         assert!(e.map().is_some());
         let mut e = Estimator::default();
         for _ in 0..MIN_SAMPLES - 1 {
-            e.add_frame(&lv, &lv, &objs, &pairs(2));
+            e.add_frame(&lv, &lv, &objs, &pairs(2), 1.0);
         }
         assert!(e.map().is_none());
-        e.add_frame(&lv, &lv, &objs, &[]);
+        e.add_frame(&lv, &lv, &objs, &[], 1.0);
         assert!(e.map().is_none());
     }
 
@@ -432,12 +527,12 @@ mod tests {
         let objs = objects(&boxes);
         let mut e = Estimator::default();
         for _ in 0..POOL {
-            e.add_frame(&lv, &lv, &objs, &pairs(2));
+            e.add_frame(&lv, &lv, &objs, &pairs(2), 1.0);
         }
         assert!(e.map().unwrap().is_identity());
         // the rig changes: once more than half the pool is new, so is the map
         for _ in 0..POOL / 4 + 1 {
-            e.add_frame(&lv, &rv, &objs, &pairs(2));
+            e.add_frame(&lv, &rv, &objs, &pairs(2), 1.0);
         }
         assert_eq!(e.len(), POOL);
         let m = e.map().unwrap();
@@ -455,5 +550,63 @@ mod tests {
         assert_eq!(t[255], 255);
         assert!(t.windows(2).all(|p| p[0] <= p[1]));
         assert_eq!(Photometric::IDENTITY.lut()[77], 77);
+    }
+
+    #[test]
+    fn the_water_level_is_a_trimmed_mean() {
+        let (w, h) = (256, 160);
+        // water at 30 with a bright band (mesh, glow) over a third of the
+        // rows and a few black pixels: the level is the water's
+        let mut img = vec![30u8; w * h];
+        for (i, p) in img.iter_mut().enumerate() {
+            if i / w < h / 3 {
+                *p = 200;
+            } else if i % 97 == 0 {
+                *p = 0;
+            }
+        }
+        let v = ImageView::packed(&img, w, h).unwrap();
+        let l = frame_level(&v).unwrap();
+        assert!((l - 30.0).abs() < 1e-3, "{l}");
+        // a scaled view scales the level
+        let half: Vec<u8> = img.iter().map(|&p| p / 2).collect();
+        let l2 = frame_level(&ImageView::packed(&half, w, h).unwrap()).unwrap();
+        assert!((l2 - 15.0).abs() < 1e-3, "{l2}");
+        assert!(frame_level(&ImageView::packed(&[0u8; 64], 8, 8).unwrap()).is_none());
+    }
+
+    #[test]
+    fn a_flash_is_taken_out_and_a_steady_rig_is_left_alone() {
+        let (w, h) = (200, 120);
+        let boxes = [Roi::new(20, 20, 60, 20), Roi::new(110, 30, 70, 24)];
+        let scene = [(boxes[0], 80.0), (boxes[1], 60.0)];
+        let objs = objects(&boxes);
+        let l = frame(w, h, 20.0, &scene, 1.0, 0.0);
+        let lv = ImageView::packed(&l, w, h).unwrap();
+        let mut e = Estimator::default();
+        // a rig whose right camera records 0.8 of the left, steadily
+        let r = frame(w, h, 20.0, &scene, 0.8, 0.0);
+        let rv = ImageView::packed(&r, w, h).unwrap();
+        for _ in 0..6 {
+            let q = e.add_levels(&lv, &rv);
+            assert!((q - 1.0).abs() < 1e-6, "{q}");
+            e.add_frame(&lv, &rv, &objs, &pairs(2), q);
+        }
+        let rig = e.map().unwrap();
+        assert!((rig.gain - 1.25).abs() < 0.05, "{rig:?}");
+        // one flash the right camera catches at 0.6 of its usual light
+        let r = frame(w, h, 20.0, &scene, 0.8 * 0.6, 0.0);
+        let rv = ImageView::packed(&r, w, h).unwrap();
+        let q = e.add_levels(&lv, &rv);
+        assert!((q - 1.0 / 0.6).abs() < 0.08, "{q}");
+        e.add_frame(&lv, &rv, &objs, &pairs(2), q);
+        // the rig's map is unmoved by the flash's samples
+        let rig2 = e.map().unwrap();
+        assert!((rig2.gain - rig.gain).abs() < 0.02, "{rig2:?}");
+        // and the frame's map brings this right view to the left
+        let m = rig2.after_flash(q);
+        let lut = m.lut();
+        assert!((lut[r[25 * w + 40] as usize] as i32 - l[25 * w + 40] as i32).abs() <= 3);
+        assert!((lut[r[5 * w + 5] as usize] as i32 - l[5 * w + 5] as i32).abs() <= 2);
     }
 }

@@ -350,8 +350,11 @@ pub struct Pipeline<
     history: [FrameSlot<N>; Q],
     accs: heapless::Vec<TrackAcc<F>, T>,
     stats: PipelineStats,
-    /// The photometric map in use (identity until the pool gives one).
+    /// The photometric map of the last frame (the pool's, after the
+    /// frame's flash factor).
     photometric: Photometric,
+    /// The pool's map (identity until the pool gives one).
+    photometric_rig: Photometric,
     /// The recent pairs' photometric samples.
     photometric_pool: photometric::Estimator,
 }
@@ -421,6 +424,7 @@ impl<
             accs: heapless::Vec::new(),
             stats: PipelineStats::default(),
             photometric: Photometric::IDENTITY,
+            photometric_rig: Photometric::IDENTITY,
             photometric_pool: photometric::Estimator::default(),
         })
     }
@@ -530,16 +534,18 @@ impl<
         // mapped right view (the workspace is free after segmentation)
         let mut right = right;
         if params.photometric {
+            let q = self.photometric_pool.add_levels(&left, &right);
             let added =
                 self.photometric_pool
-                    .add_frame(&left, &right, &self.left, &self.pairs.pairs);
+                    .add_frame(&left, &right, &self.left, &self.pairs.pairs, q);
             if added > 0 {
                 self.stats.photometric_estimated =
                     self.stats.photometric_estimated.saturating_add(1);
             }
             if let Some(m) = self.photometric_pool.map() {
-                self.photometric = m;
+                self.photometric_rig = m;
             }
+            self.photometric = self.photometric_rig.after_flash(q);
             if !self.photometric.is_identity() {
                 right = self
                     .photometric

@@ -27,7 +27,7 @@ fn main() -> Result<()> {
             _ => hauls.push(a),
         }
     }
-    println!("haul,frame,x,y,w,h,len,area,mean,var,hw,hh,gt,noise16,vlim");
+    println!("haul,frame,x,y,w,h,len,area,mean,var,hw,hh,gt,noise16,vlim,gtl");
     for hp in hauls {
         let haul = Haul::open(std::path::Path::new(&hp))?;
         let calib = load_calibration(&haul)?;
@@ -61,7 +61,7 @@ fn main() -> Result<()> {
             let rows = detection_rows(pair.index, &objs, &rect.left);
             for (r, o) in rows.iter().zip(objs.items.iter()) {
                 println!(
-                    "{},{},{:.1},{:.1},{:.1},{:.1},{:.1},{},{:.2},{:.2},{:.1},{:.1},{},{},{:.2}",
+                    "{},{},{:.1},{:.1},{:.1},{:.1},{:.1},{},{:.2},{:.2},{:.1},{:.1},{},{},{:.2},{}",
                     hp,
                     pair.index,
                     r.bbox[0],
@@ -76,7 +76,8 @@ fn main() -> Result<()> {
                     o.obb.half_h,
                     st.gradient_threshold,
                     st.noise_sigma16,
-                    st.var_limit
+                    st.var_limit,
+                    st.gradient_threshold_low
                 );
             }
         }

@@ -63,7 +63,7 @@ pub fn run(dir: &Path) -> Result<()> {
     let mut raw_lengths = Tally::default();
     let mut all_obs = Vec::new();
     let mut photo_pool = rp::Pool::default();
-    let mut photo_map = (1.0f64, 0.0f64);
+    let mut photo_rig = (1.0f64, 0.0f64);
     let mut core_asg: Vec<Assignment> = Vec::new();
     let on_event = |e: &PipelineEvent, out: &mut Vec<Assignment>| {
         if let PipelineEvent::TrackFrame {
@@ -116,10 +116,12 @@ pub fn run(dir: &Path) -> Result<()> {
         let mapped;
         let mut rg = rg;
         if setup.params.photometric {
-            photo_pool.add_frame(&lg, &rg, &lo, &ref_pairs);
+            let q = photo_pool.add_levels(&lg, &rg);
+            photo_pool.add_frame(&lg, &rg, &lo, &ref_pairs, q);
             if let Some(m) = photo_pool.map() {
-                photo_map = m;
+                photo_rig = m;
             }
+            let photo_map = (photo_rig.0 * q, photo_rig.1);
             if !rp::is_identity(photo_map) {
                 mapped = rp::apply(&rg, photo_map);
                 rg = Gray {

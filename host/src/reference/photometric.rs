@@ -5,14 +5,19 @@
 //! median of a ring around the box; the map `l = g·r + o` is the medians
 //! over the last `POOL` samples; the right frame is mapped through
 //! `round(g·r + o)` when the map is not within the tolerances of the
-//! identity. Written independently in `f64` with a `VecDeque` pool; the
+//! identity. A flash's factor `q` (the two views' water levels' ratio
+//! over its median of the last `POOL` frames, each level the mean of the
+//! sampled pixels ranked between the 10th and 60th percentiles) is taken
+//! out of the samples and put into the frame's map, `l = g·q·r + o`.
+//! Written independently in `f64` with a `VecDeque` pool; the
 //! ring is the reference's own (`stereo::background`, the one its length
 //! stage uses).
 
 use std::collections::VecDeque;
 
 use fishtrack_core::photometric::{
-    GAIN_RANGE, GAIN_TOLERANCE, MIN_CONTRAST, MIN_SAMPLES, OFFSET_TOLERANCE, POOL,
+    GAIN_RANGE, GAIN_TOLERANCE, LEVEL_STEP, LEVEL_TRIM, MIN_CONTRAST, MIN_SAMPLES,
+    OFFSET_TOLERANCE, POOL,
 };
 
 use super::stereo::{background, Gray, RefObject, RefPair};
@@ -22,6 +27,27 @@ use crate::stats::median;
 #[derive(Debug, Default, Clone)]
 pub struct Pool {
     samples: VecDeque<(f64, f64, f64)>,
+    ratios: VecDeque<f64>,
+}
+
+/// The water's level of a view: the sampled pixels sorted, the mean of
+/// those ranked between the `LEVEL_TRIM` tenths (core: `frame_level`).
+pub fn frame_level(g: &Gray) -> Option<f64> {
+    let mut v: Vec<u8> = (0..g.h)
+        .step_by(LEVEL_STEP.0)
+        .flat_map(|y| {
+            g.data[y * g.w..(y + 1) * g.w]
+                .iter()
+                .step_by(LEVEL_STEP.1)
+                .copied()
+        })
+        .collect();
+    v.sort_unstable();
+    let n = v.len() as u64;
+    let (lo, hi) = (n * LEVEL_TRIM.0 / 10, n * LEVEL_TRIM.1 / 10);
+    let part = &v[lo as usize..hi as usize];
+    let sum: f64 = part.iter().map(|&p| p as f64).sum();
+    (!part.is_empty() && sum > 0.0).then(|| sum / part.len() as f64)
 }
 
 /// One pair's `(gain, ring_L, ring_R)`, or `None` when the fish is not
@@ -58,22 +84,42 @@ fn sample(l: &Gray, r: &Gray, lo: &RefObject, p: &RefPair) -> Option<(f64, f64, 
 }
 
 impl Pool {
+    /// The frame's flash factor: its level ratio over the median of the
+    /// last `POOL` ratios (core: `Estimator::add_levels`).
+    pub fn add_levels(&mut self, l: &Gray, r: &Gray) -> f64 {
+        let (Some(a), Some(b)) = (frame_level(l), frame_level(r)) else {
+            return 1.0;
+        };
+        let ratio = a / b;
+        if self.ratios.len() == POOL {
+            self.ratios.pop_front();
+        }
+        self.ratios.push_back(ratio);
+        let q = ratio / median(&mut self.ratios.iter().copied().collect::<Vec<_>>());
+        if q.is_finite() && (GAIN_RANGE.0 as f64..=GAIN_RANGE.1 as f64).contains(&q) {
+            q
+        } else {
+            1.0
+        }
+    }
+
     /// Adds the samples of one frame's pairs (`left` the frame's left
-    /// objects); returns how many.
+    /// objects), its flash factor `q` taken out; returns how many.
     pub fn add_frame(
         &mut self,
         l: &Gray,
         r: &Gray,
         left: &[RefObject],
         pairs: &[RefPair],
+        q: f64,
     ) -> usize {
         let mut n = 0;
         for p in pairs {
-            if let Some(s) = left.get(p.left).and_then(|lo| sample(l, r, lo, p)) {
+            if let Some((g, bl, br)) = left.get(p.left).and_then(|lo| sample(l, r, lo, p)) {
                 if self.samples.len() == POOL {
                     self.samples.pop_front();
                 }
-                self.samples.push_back(s);
+                self.samples.push_back((g / q, bl, br * q));
                 n += 1;
             }
         }
