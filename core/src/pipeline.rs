@@ -25,7 +25,9 @@
 //! the two cameras record the fish at different grey levels, the right
 //! frame is mapped through a look-up table into the workspace (free once
 //! both views are segmented) and the pairing and the lengths use the
-//! mapped view.
+//! mapped view; the two views' water levels give each frame's flash
+//! factor, so a flash that lights one view more than the other is mapped
+//! too.
 //!
 //! # Memory
 //! Everything is inline: `Pipeline<N, R, T, D, K, H, Q, F>` holds the left
@@ -34,7 +36,7 @@
 //! frames' per-observation results (committed track frames arrive up to `D`
 //! frames late, so `Q > D` is required), a table of `T` per-track
 //! [`LengthAccumulator<F>`]s keyed by track id, and the photometric pool
-//! ([`photometric::POOL`] samples). The segmentation scratch is
+//! ([`photometric::POOL`] samples and as many frames' level ratios). The segmentation scratch is
 //! the caller's `ws` of [`Pipeline::workspace_size`] bytes. Capacity
 //! overflow anywhere is counted in [`PipelineStats`], never fatal.
 //! `size_of::<DefaultPipeline>()` is checked to stay ≤ 512 KiB.

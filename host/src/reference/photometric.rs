@@ -16,7 +16,7 @@
 use std::collections::VecDeque;
 
 use fishtrack_core::photometric::{
-    GAIN_RANGE, GAIN_TOLERANCE, LEVEL_STEP, LEVEL_TRIM, MIN_CONTRAST, MIN_SAMPLES,
+    FLASH_TOLERANCE, GAIN_RANGE, GAIN_TOLERANCE, LEVEL_STEP, LEVEL_TRIM, MIN_CONTRAST, MIN_SAMPLES,
     OFFSET_TOLERANCE, POOL,
 };
 
@@ -96,7 +96,10 @@ impl Pool {
         }
         self.ratios.push_back(ratio);
         let q = ratio / median(&mut self.ratios.iter().copied().collect::<Vec<_>>());
-        if q.is_finite() && (GAIN_RANGE.0 as f64..=GAIN_RANGE.1 as f64).contains(&q) {
+        if q.is_finite()
+            && (GAIN_RANGE.0 as f64..=GAIN_RANGE.1 as f64).contains(&q)
+            && (q - 1.0).abs() > FLASH_TOLERANCE as f64
+        {
             q
         } else {
             1.0
