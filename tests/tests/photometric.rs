@@ -122,12 +122,7 @@ fn a_gain_mismatch_between_the_cameras_is_estimated_and_mapped_away() {
         "gain {g_on} / {g_matched}, want × {want}"
     );
     // mapped: about as many lengths as the matched haul, about as good
-    assert!(
-        n_on as f64 >= 0.85 * n_matched as f64,
-        "{n_on} vs {n_matched}"
-    );
-    let (a, b) = (mape_on.unwrap(), mape_matched.unwrap());
-    assert!(a <= b + 0.01, "per-frame MAPE {a} vs matched {b}");
+    assert_like_matched((n_on, mape_on), (n_matched, mape_matched));
     // without the match the mismatch costs most of the lengths
     assert!(
         (n_off as f64) < 0.6 * n_on as f64,
@@ -135,13 +130,28 @@ fn a_gain_mismatch_between_the_cameras_is_estimated_and_mapped_away() {
     );
 }
 
-#[test]
-fn core_and_reference_agree_on_the_mismatched_haul() {
-    let (_, g) = hauls();
-    let out = run(&["compare", g.to_str().unwrap()]);
+/// At least 85 % of the matched haul's lengths, and a per-frame MAPE
+/// within one point of its.
+fn assert_like_matched(
+    (n, mape): (u64, Option<f64>),
+    (n_matched, mape_matched): (u64, Option<f64>),
+) {
+    assert!(n as f64 >= 0.85 * n_matched as f64, "{n} vs {n_matched}");
+    let (a, b) = (mape.unwrap(), mape_matched.unwrap());
+    assert!(a <= b + 0.01, "per-frame MAPE {a} vs matched {b}");
+}
+
+/// `fishtrack compare` on `haul` reports agreement.
+fn assert_compare_agrees(haul: &Path) {
+    let out = run(&["compare", haul.to_str().unwrap()]);
     let so = text(&out.stdout);
     assert!(out.status.success(), "{so}\n{}", text(&out.stderr));
     assert!(so.contains("core and reference agree"), "{so}");
+}
+
+#[test]
+fn core_and_reference_agree_on_the_mismatched_haul() {
+    assert_compare_agrees(&hauls().1);
 }
 
 /// The flickering copy of the matched haul, made once.
@@ -163,19 +173,15 @@ fn a_right_camera_that_flickers_flash_to_flash_is_followed() {
     let (_, n_on, mape_on) = run_case(f, true);
     let (_, n_off, _) = run_case(f, false);
     eprintln!(
-        "{}: matched {n_matched} measured, MAPE {mape_matched:?}; flickering:          {n_on} measured, MAPE {mape_on:?}; off: {n_off} measured",
+        "{}: matched {n_matched} measured, MAPE {mape_matched:?}; \
+         flickering: {n_on} measured, MAPE {mape_on:?}; off: {n_off} measured",
         f.display()
     );
     // the frames' maps follow the flashes: about as many lengths as the
     // matched haul, about as good (the rig's pool alone, session 9's code,
     // which cannot follow one flash, measured 17 where the matched haul
     // gives 25)
-    assert!(
-        n_on as f64 >= 0.85 * n_matched as f64,
-        "{n_on} vs {n_matched}"
-    );
-    let (a, b) = (mape_on.unwrap(), mape_matched.unwrap());
-    assert!(a <= b + 0.01, "per-frame MAPE {a} vs matched {b}");
+    assert_like_matched((n_on, mape_on), (n_matched, mape_matched));
     assert!(
         (n_off as f64) < 0.8 * n_matched as f64,
         "{n_off} measured without the match vs {n_on} with it"
@@ -184,8 +190,5 @@ fn a_right_camera_that_flickers_flash_to_flash_is_followed() {
 
 #[test]
 fn core_and_reference_agree_on_the_flickering_haul() {
-    let out = run(&["compare", flickering().to_str().unwrap()]);
-    let so = text(&out.stdout);
-    assert!(out.status.success(), "{so}\n{}", text(&out.stderr));
-    assert!(so.contains("core and reference agree"), "{so}");
+    assert_compare_agrees(flickering());
 }
