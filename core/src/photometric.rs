@@ -35,8 +35,8 @@
 //! **Flash to flash** (session 10). A mismatch can also change with every
 //! flash: each camera's exposure catches a different part of the strobe's
 //! pulse, or each has its own strobe (`scripts/perturb_haul.py flicker`:
-//! each view × 0.65–1.35 per frame lost 35 of 117 measured fish-frames and
-//! 16 of 67 tracked fish on seeds 1–4). The pool of fish samples follows
+//! each view × 0.65–1.35 per frame lost 41 of the 117 fish-frames measured
+//! in 3-D and 8 of the 67 tracked fish on seeds 1–4). The pool of fish samples follows
 //! the rig, not one flash, and one frame seldom has the five pairs a map
 //! needs. The water does: [`frame_level`] is a trimmed mean of the water's
 //! grey level in each view (sampled pixels between their 10th and 60th
