@@ -36,8 +36,8 @@
 //! frames' per-observation results (committed track frames arrive up to `D`
 //! frames late, so `Q > D` is required), a table of `T` per-track
 //! [`LengthAccumulator<F>`]s keyed by track id, and the photometric pool
-//! ([`photometric::POOL`] samples and as many frames' level ratios). The segmentation scratch is
-//! the caller's `ws` of [`Pipeline::workspace_size`] bytes. Capacity
+//! ([`photometric::POOL`] samples and as many frames' level ratios). The
+//! segmentation scratch is the caller's `ws` of [`Pipeline::workspace_size`] bytes. Capacity
 //! overflow anywhere is counted in [`PipelineStats`], never fatal.
 //! `size_of::<DefaultPipeline>()` is checked to stay ≤ 512 KiB.
 

@@ -1,5 +1,6 @@
 //! Diagnostic dump (development aid): per segmented object of every left
-//! frame, its raw box and features, as CSV on stdout.
+//! frame, its raw box and features, as CSV on stdout (`gt`, `gtl`: the
+//! coarse pass's seed and low hysteresis thresholds).
 //! `seg_diag [--no-var] [--literal] [--regions] [--noise-floor F] HAUL...` (`--regions`: also
 //! one `R,…` row per local region: raw-left centre, semi-axes, angle, τ).
 use anyhow::Result;
