@@ -41,9 +41,7 @@ pub struct RectifiedPair<'a> {
 /// Reads and rectifies one pair (both sides in parallel).
 pub fn rectify_one<'a>(setup: &Setup, pair: &'a FramePair) -> Result<RectifiedPair<'a>> {
     let t0 = Instant::now();
-    let (l, r) = setup
-        .haul
-        .load_pair(pair, Some((setup.width, setup.height)))?;
+    let (l, r) = setup.load_pair(pair)?;
     let read_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let (left, right) = setup.rectifier.rectify_pair(&l, &r).map_err(|e| {

@@ -8,6 +8,7 @@
 
 pub mod bench_cmd;
 pub mod calib;
+pub mod columns;
 pub mod compare_cmd;
 pub mod demo_cmd;
 pub mod detect;

@@ -27,6 +27,7 @@ use image::GrayImage;
 use nalgebra::{Matrix3x4, Vector3};
 use serde_json::json;
 
+use crate::columns::ColumnOffsets;
 use fishtrack_core::geometry::StereoGeometry;
 use fishtrack_core::image::Roi;
 use fishtrack_core::params::{Params, Tracker as Association};
@@ -76,6 +77,9 @@ pub struct Setup {
     pub width: u32,
     /// Frame height.
     pub height: u32,
+    /// Column fixed-pattern offsets of the left and right cameras
+    /// ([`crate::columns`]), taken out of every raw frame.
+    pub columns: [Option<ColumnOffsets>; 2],
 }
 
 /// Parses `--tracker`.
@@ -186,6 +190,27 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     params
         .validate()
         .map_err(|e| InputError::plain("parameters", format!("{e}")))?;
+    // the cameras' column offsets, from frames spread over the haul
+    let pairs: Vec<(GrayImage, GrayImage)> = {
+        use rayon::prelude::*;
+        crate::columns::spread(haul.frames.len(), crate::columns::SAMPLE_FRAMES)
+            .into_par_iter()
+            .map(|i| haul.load_pair(&haul.frames[i], Some((width, height))))
+            .collect::<Result<_, _>>()?
+    };
+    let (lefts, rights): (Vec<GrayImage>, Vec<GrayImage>) = pairs.into_iter().unzip();
+    let columns = [
+        ColumnOffsets::estimate(&lefts),
+        ColumnOffsets::estimate(&rights),
+    ];
+    for (cam, c) in ["left", "right"].iter().zip(&columns) {
+        if let Some(c) = c.as_ref().filter(|c| c.applied.is_some()) {
+            log::info!(
+                "{cam} camera: column offsets of RMS {:.2} grey levels taken out",
+                c.rms
+            );
+        }
+    }
     Ok(Setup {
         haul,
         rectifier,
@@ -193,6 +218,7 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
         geometry,
         width,
         height,
+        columns,
     })
 }
 
@@ -206,9 +232,20 @@ impl Setup {
         cfg
     }
 
+    /// Loads one raw frame pair, the cameras' column offsets taken out.
+    pub fn load_pair(&self, pair: &FramePair) -> Result<(GrayImage, GrayImage)> {
+        let (mut l, mut r) = self.haul.load_pair(pair, Some((self.width, self.height)))?;
+        for (img, c) in [&mut l, &mut r].into_iter().zip(&self.columns) {
+            if let Some(c) = c {
+                c.apply(img);
+            }
+        }
+        Ok((l, r))
+    }
+
     /// Loads and rectifies one frame pair.
     pub fn rectified(&self, pair: &FramePair) -> Result<(GrayImage, GrayImage)> {
-        let (l, r) = self.haul.load_pair(pair, Some((self.width, self.height)))?;
+        let (l, r) = self.load_pair(pair)?;
         let out = self.rectifier.rectify_pair(&l, &r).map_err(|e| {
             InputError::file(
                 &pair.left,
@@ -698,6 +735,10 @@ fn write_summary(
             "workspace_bytes": DefaultPipeline::workspace_size(setup.width as usize, setup.height as usize),
         },
         "params": setup.params,
+        "column_offsets": setup.columns.iter().map(|c| serde_json::json!({
+            "rms": c.as_ref().map(|c| c.rms),
+            "applied": c.as_ref().is_some_and(|c| c.applied.is_some()),
+        })).collect::<Vec<_>>(),
         "photometric": {
             "frames_mapped": stats.photometric_mapped,
             "frames_estimated": stats.photometric_estimated,
