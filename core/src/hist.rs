@@ -189,6 +189,25 @@ pub fn percentile_256(hist: &[u32; 256], pct: u32) -> u8 {
     255
 }
 
+/// Mean of a histogram's values ranked from the `lo`-th to the `hi`-th
+/// tenth (`⌊n·lo/10⌋ ≤ rank < ⌊n·hi/10⌋`, bins counted in part at the two
+/// ends): a trimmed mean. `None` when that range is empty or all zero.
+pub fn trimmed_mean_256(hist: &[u32; 256], lo: u64, hi: u64) -> Option<f32> {
+    let n: u64 = hist.iter().map(|&c| c as u64).sum();
+    let (lo, hi) = (n * lo / 10, n * hi / 10);
+    let (mut below, mut sum, mut cnt) = (0u64, 0u64, 0u64);
+    for (v, &c) in hist.iter().enumerate() {
+        let c = c as u64;
+        let (a, b) = (below.max(lo), (below + c).min(hi));
+        if b > a {
+            sum += (b - a) * v as u64;
+            cnt += b - a;
+        }
+        below += c;
+    }
+    (cnt > 0 && sum > 0).then(|| sum as f32 / cnt as f32)
+}
+
 /// Lower median (the ⌈n/2⌉-th smallest) of a histogram's values: the
 /// first bin where the running count reaches half; the last bin when the
 /// histogram is empty.
@@ -260,6 +279,21 @@ pub fn ratio_backprojection_lut_range(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn trimmed_mean_is_the_mean_of_the_sorted_values_in_the_rank_range() {
+        // values 0..100 once each: ranks 10..60 are the values 10..59
+        let mut h = [0u32; 256];
+        (0..100).for_each(|v| h[v] += 1);
+        assert_eq!(trimmed_mean_256(&h, 1, 6), Some(34.5));
+        // a bin straddling the range's ends counts in part
+        let mut h = [0u32; 256];
+        h[10] = 5;
+        h[20] = 5;
+        // n = 10: ranks 1..6 are 10, 10, 10, 10, 20
+        assert_eq!(trimmed_mean_256(&h, 1, 6), Some(12.0));
+        assert_eq!(trimmed_mean_256(&[0; 256], 1, 6), None);
+    }
 
     #[test]
     fn bins_follow_calc_hist() {

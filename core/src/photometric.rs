@@ -98,26 +98,15 @@ pub const LEVEL_TRIM: (u64, u64) = (1, 6);
 /// mean moves smoothly with the frame). `None` for an empty view or black
 /// water.
 pub fn frame_level(img: &ImageView<'_>) -> Option<f32> {
-    let mut hist = [0u64; 256];
+    let mut hist = [0u32; 256];
     for y in (0..img.height()).step_by(LEVEL_STEP.0) {
         for &p in img.row(y).iter().step_by(LEVEL_STEP.1) {
             if let Some(c) = hist.get_mut(p as usize) {
-                *c += 1;
+                *c = c.saturating_add(1);
             }
         }
     }
-    let n: u64 = hist.iter().sum();
-    let (lo, hi) = (n * LEVEL_TRIM.0 / 10, n * LEVEL_TRIM.1 / 10);
-    let (mut below, mut sum, mut cnt) = (0u64, 0u64, 0u64);
-    for (v, &c) in hist.iter().enumerate() {
-        let (a, b) = (below.max(lo), (below + c).min(hi));
-        if b > a {
-            sum += (b - a) * v as u64;
-            cnt += b - a;
-        }
-        below += c;
-    }
-    (cnt > 0 && sum > 0).then(|| sum as f32 / cnt as f32)
+    crate::hist::trimmed_mean_256(&hist, LEVEL_TRIM.0, LEVEL_TRIM.1)
 }
 
 /// The grey-level map `l = gain · r + offset` from the right view to the

@@ -20,12 +20,15 @@
 //! clamped to 0–255); the synthetic hauls' cameras, which have no such
 //! pattern, measure 0.04–0.10 and stay untouched, byte for byte.
 
+use fishtrack_core::hist::trimmed_mean_256;
 use image::GrayImage;
 
 /// Frames (spread evenly over the haul) the estimate reads per camera.
 pub const SAMPLE_FRAMES: usize = 6;
 /// Rows between the pixels a column profile reads.
 pub const ROW_STEP: u32 = 4;
+/// The rank range, in tenths, a column profile averages.
+pub const TRIM: (u64, u64) = (1, 6);
 /// Half the running median's window, columns.
 pub const HALF_WINDOW: usize = 16;
 /// Offsets' RMS, grey levels, from which they are applied.
@@ -47,31 +50,15 @@ pub fn column_profile(img: &GrayImage) -> Vec<f64> {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let mut hist = vec![0u32; w * 256];
     let raw = img.as_raw();
-    let mut n = 0usize;
     for y in (0..h).step_by(ROW_STEP as usize) {
         for (x, &p) in raw[y * w..(y + 1) * w].iter().enumerate() {
             hist[x * 256 + p as usize] += 1;
         }
-        n += 1;
     }
-    let (lo, hi) = (n / 10, 6 * n / 10);
-    (0..w)
-        .map(|x| {
-            let (mut below, mut sum, mut cnt) = (0usize, 0f64, 0usize);
-            for (v, &c) in hist[x * 256..(x + 1) * 256].iter().enumerate() {
-                let c = c as usize;
-                let (a, b) = (below.max(lo), (below + c).min(hi));
-                if b > a {
-                    sum += ((b - a) * v) as f64;
-                    cnt += b - a;
-                }
-                below += c;
-            }
-            if cnt > 0 {
-                sum / cnt as f64
-            } else {
-                0.0
-            }
+    hist.chunks_exact(256)
+        .map(|h| {
+            let h: &[u32; 256] = h.try_into().expect("chunks of 256");
+            trimmed_mean_256(h, TRIM.0, TRIM.1).map_or(0.0, f64::from)
         })
         .collect()
 }
