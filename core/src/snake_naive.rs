@@ -4,7 +4,7 @@
 
 #![allow(clippy::too_many_arguments, clippy::needless_range_loop)]
 
-use super::{point_in_polygon, SnakeParams, SnakeResult, SNAKE_POINTS};
+use super::{SnakeParams, SnakeResult, SNAKE_POINTS};
 use crate::image::ImageView;
 
 fn smooth(img: &ImageView<'_>, x: i32, y: i32) -> f32 {
@@ -227,4 +227,23 @@ pub fn tail_snake_naive(
         res.far_t = far;
     }
     res
+}
+
+/// Even–odd rule point-in-polygon test (the per-pixel form of
+/// [`super::fill_polygon`]).
+pub fn point_in_polygon(pts: &[(f32, f32); SNAKE_POINTS], x: f32, y: f32) -> bool {
+    let mut inside = false;
+    let mut j = SNAKE_POINTS - 1;
+    for i in 0..SNAKE_POINTS {
+        let (xi, yi) = pts[i];
+        let (xj, yj) = pts[j];
+        if (yi > y) != (yj > y) {
+            let xc = xj + (y - yj) * (xi - xj) / (yi - yj);
+            if x < xc {
+                inside = !inside;
+            }
+        }
+        j = i;
+    }
+    inside
 }
