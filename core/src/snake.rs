@@ -23,8 +23,8 @@
 //! The caller recomputes the end point from [`SnakeResult::far_t`].
 //!
 //! Memory bound: `SNAKE_POINTS` points, a 512-sample ring, 8 remembered
-//! contours, the hashes of the last 64 (512 B) and a 96 × 96 window of
-//! memoised 5 × 5 box sums (18 KiB) on the stack. Work: at most
+//! contours, the hashes of the last 64 (512 B) and a 64 × 64 torus of
+//! memoised 5 × 5 box sums (24 KiB) on the stack. Work: at most
 //! `iterations · SNAKE_POINTS · (2k+1)²` candidates of 5 memoised sums
 //! each, 25 pixel reads per distinct pixel the contour visits, and about 5
 //! per pixel of the final contour's box (scan conversion with sliding box
@@ -155,43 +155,46 @@ fn box_sum(img: &ImageView<'_>, x: i32, y: i32) -> u32 {
     s
 }
 
-/// Side of the square window of memoised box sums around the snake's
-/// starting circle (18 KiB of stack); sums outside it are computed afresh.
-const CACHE_SIDE: usize = 96;
+/// Side of the torus of memoised box sums, a power of two: pixel `(x, y)`
+/// has the slot `(x mod 64, y mod 64)`, tagged with its coordinates
+/// (24 KiB of stack).
+const CACHE_SIDE: usize = 64;
 
-/// Marks a window entry not computed yet (a sum is at most 6375).
-const UNSET: u16 = u16::MAX;
+/// Marks a slot not filled yet (no pixel's tag: tags have halves < 0xFFFF).
+const UNSET: u32 = u32::MAX;
 
-/// The 5 × 5 box sums the snake reads, each computed once: the greedy
-/// sweeps revisit the same pixels many times, and every energy term reads
-/// the box-smoothed image only. Values are exactly those of [`box_sum`],
-/// so the contour moves exactly as with direct reads.
+/// The 5 × 5 box sums the snake reads, each computed once while it stays
+/// in its slot: the greedy sweeps revisit the same pixels many times, and
+/// every energy term reads the box-smoothed image only. A direct-mapped
+/// torus rather than a fixed window, so a contour that wanders or grows
+/// far from its starting circle is still served (two pixels share a slot
+/// only 64 apart in both axes at once). Values are exactly those of
+/// [`box_sum`], so the contour moves exactly as with direct reads.
 struct BoxSums<'a, 'b> {
     img: &'a ImageView<'b>,
-    ox: i32,
-    oy: i32,
+    tags: [u32; CACHE_SIDE * CACHE_SIDE],
     sums: [u16; CACHE_SIDE * CACHE_SIDE],
 }
 
 impl<'a, 'b> BoxSums<'a, 'b> {
-    /// Window centred at `(cx, cy)`.
-    fn new(img: &'a ImageView<'b>, cx: f32, cy: f32) -> Self {
-        let half = (CACHE_SIDE / 2) as f32;
-        let clampi = |v: f32| v.clamp(-1.0e7, 1.0e7) as i32;
+    /// An empty cache over `img`.
+    fn new(img: &'a ImageView<'b>) -> Self {
         BoxSums {
             img,
-            ox: clampi(cx - half),
-            oy: clampi(cy - half),
-            sums: [UNSET; CACHE_SIDE * CACHE_SIDE],
+            tags: [UNSET; CACHE_SIDE * CACHE_SIDE],
+            sums: [0; CACHE_SIDE * CACHE_SIDE],
         }
     }
 
     fn sum(&mut self, x: i32, y: i32) -> u32 {
-        let i = x.wrapping_sub(self.ox) as u32 as usize;
-        let j = y.wrapping_sub(self.oy) as u32 as usize;
-        if i < CACHE_SIDE && j < CACHE_SIDE {
-            if let Some(c) = self.sums.get_mut(j * CACHE_SIDE + i) {
-                if *c == UNSET {
+        // tag halves x + 1 and y + 1: the snake reads x, y ≥ −1
+        let (kx, ky) = (x.wrapping_add(1) as u32, y.wrapping_add(1) as u32);
+        if kx < 0xFFFF && ky < 0xFFFF {
+            let tag = (ky << 16) | kx;
+            let slot = (ky as usize % CACHE_SIDE) * CACHE_SIDE + kx as usize % CACHE_SIDE;
+            if let (Some(t), Some(c)) = (self.tags.get_mut(slot), self.sums.get_mut(slot)) {
+                if *t != tag {
+                    *t = tag;
                     *c = box_sum(self.img, x, y) as u16;
                 }
                 return *c as u32;
@@ -342,7 +345,7 @@ pub fn tail_snake(
     }
     let reach = p.reach.clamp(1, 4) as i32;
     let (w, h) = (img.width() as f32, img.height() as f32);
-    let mut sums = BoxSums::new(img, cx, cy);
+    let mut sums = BoxSums::new(img);
     let limit = p.iterations.min(1000);
     let mut sweeps = 0;
     // the contour after each of the last HISTORY sweeps (`hist[n % HISTORY]`
