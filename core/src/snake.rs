@@ -24,9 +24,9 @@
 //!
 //! Memory bound: `SNAKE_POINTS` points, a 512-sample ring, 8 remembered
 //! contours, the hashes of the last 64 (512 B) and a 64 × 64 torus of
-//! memoised 5 × 5 box sums (24 KiB) on the stack. Work: at most
-//! `iterations · SNAKE_POINTS · (2k+1)²` candidates of 5 memoised sums
-//! each, 25 pixel reads per distinct pixel the contour visits, and about 5
+//! memoised 5 × 5 box sums and gradients (40 KiB) on the stack. Work: at most
+//! `iterations · SNAKE_POINTS · (2k+1)²` candidates of a memoised sum
+//! and gradient each, 25 pixel reads per distinct pixel the contour visits, and about 5
 //! per pixel of the final contour's box (scan conversion with sliding box
 //! sums). A sweep is a function of the contour alone, so a contour that
 //! repeats one of the last 8 sweeps ends the loop, and one whose hash
@@ -155,25 +155,34 @@ fn box_sum(img: &ImageView<'_>, x: i32, y: i32) -> u32 {
     s
 }
 
-/// Side of the torus of memoised box sums, a power of two: pixel `(x, y)`
-/// has the slot `(x mod 64, y mod 64)`, tagged with its coordinates
-/// (24 KiB of stack).
+/// Side of the torus of memoised box sums and gradients, a power of two:
+/// pixel `(x, y)` has the slot `(x mod 64, y mod 64)`, tagged with
+/// `(x div 64, y div 64)` (40 KiB of stack in all).
 const CACHE_SIDE: usize = 64;
 
-/// Marks a slot not filled yet (no pixel's tag: tags have halves < 0xFFFF).
-const UNSET: u32 = u32::MAX;
+/// Coordinates (plus one) the memo serves: tag halves below 255, so the
+/// tag `0xFFFF` marks an empty slot. Pixels beyond (frames wider or
+/// taller than 16 319 px) are computed afresh.
+const TAG_LIMIT: u32 = 255 * CACHE_SIDE as u32;
 
-/// The 5 × 5 box sums the snake reads, each computed once while it stays
-/// in its slot: the greedy sweeps revisit the same pixels many times, and
-/// every energy term reads the box-smoothed image only. A direct-mapped
-/// torus rather than a fixed window, so a contour that wanders or grows
-/// far from its starting circle is still served (two pixels share a slot
-/// only 64 apart in both axes at once). Values are exactly those of
-/// [`box_sum`], so the contour moves exactly as with direct reads.
+/// An empty slot.
+const UNSET: u16 = u16::MAX;
+
+/// The 5 × 5 box sums and their gradients the snake reads, each computed
+/// once while it stays in its slot: the greedy sweeps revisit the same
+/// pixels many times (on the hauls every snake runs its whole sweep
+/// bound), and every energy term reads the box-smoothed image only. A
+/// direct-mapped torus rather than a fixed window, so a contour that
+/// wanders or grows far from its starting circle is still served (two
+/// pixels share a slot only 64 apart in both axes at once). Values are
+/// exactly those of [`box_sum`] and of the central difference of its
+/// means, so the contour moves exactly as with direct reads.
 struct BoxSums<'a, 'b> {
     img: &'a ImageView<'b>,
-    tags: [u32; CACHE_SIDE * CACHE_SIDE],
-    sums: [u16; CACHE_SIDE * CACHE_SIDE],
+    /// `tag << 16 | sum` (a sum is at most 6375).
+    sums: [u32; CACHE_SIDE * CACHE_SIDE],
+    gtags: [u16; CACHE_SIDE * CACHE_SIDE],
+    grads: [f32; CACHE_SIDE * CACHE_SIDE],
 }
 
 impl<'a, 'b> BoxSums<'a, 'b> {
@@ -181,23 +190,31 @@ impl<'a, 'b> BoxSums<'a, 'b> {
     fn new(img: &'a ImageView<'b>) -> Self {
         BoxSums {
             img,
-            tags: [UNSET; CACHE_SIDE * CACHE_SIDE],
-            sums: [0; CACHE_SIDE * CACHE_SIDE],
+            sums: [u32::MAX; CACHE_SIDE * CACHE_SIDE],
+            gtags: [UNSET; CACHE_SIDE * CACHE_SIDE],
+            grads: [0.0; CACHE_SIDE * CACHE_SIDE],
         }
     }
 
-    fn sum(&mut self, x: i32, y: i32) -> u32 {
-        // tag halves x + 1 and y + 1: the snake reads x, y ≥ −1
+    /// Slot and tag of pixel `(x, y)`; `None` outside the memo's range.
+    fn key(x: i32, y: i32) -> Option<(usize, u16)> {
+        // x + 1, y + 1: the snake reads x, y ≥ −1
         let (kx, ky) = (x.wrapping_add(1) as u32, y.wrapping_add(1) as u32);
-        if kx < 0xFFFF && ky < 0xFFFF {
-            let tag = (ky << 16) | kx;
-            let slot = (ky as usize % CACHE_SIDE) * CACHE_SIDE + kx as usize % CACHE_SIDE;
-            if let (Some(t), Some(c)) = (self.tags.get_mut(slot), self.sums.get_mut(slot)) {
-                if *t != tag {
-                    *t = tag;
-                    *c = box_sum(self.img, x, y) as u16;
+        if kx >= TAG_LIMIT || ky >= TAG_LIMIT {
+            return None;
+        }
+        let side = CACHE_SIDE as u32;
+        let slot = ((ky % side) * side + kx % side) as usize;
+        Some((slot, ((ky / side) << 8 | kx / side) as u16))
+    }
+
+    fn sum(&mut self, x: i32, y: i32) -> u32 {
+        if let Some((slot, tag)) = Self::key(x, y) {
+            if let Some(e) = self.sums.get_mut(slot) {
+                if (*e >> 16) as u16 != tag {
+                    *e = (tag as u32) << 16 | box_sum(self.img, x, y);
                 }
-                return *c as u32;
+                return *e & 0xFFFF;
             }
         }
         box_sum(self.img, x, y)
@@ -210,6 +227,24 @@ impl<'a, 'b> BoxSums<'a, 'b> {
 
     /// Central-difference gradient magnitude of the box mean.
     fn grad(&mut self, x: i32, y: i32) -> f32 {
+        let Some((slot, tag)) = Self::key(x, y) else {
+            return self.grad_direct(x, y);
+        };
+        if self.gtags.get(slot) == Some(&tag) {
+            if let Some(&g) = self.grads.get(slot) {
+                return g;
+            }
+        }
+        let g = self.grad_direct(x, y);
+        if let (Some(t), Some(v)) = (self.gtags.get_mut(slot), self.grads.get_mut(slot)) {
+            *t = tag;
+            *v = g;
+        }
+        g
+    }
+
+    /// [`BoxSums::grad`] from the memoised sums.
+    fn grad_direct(&mut self, x: i32, y: i32) -> f32 {
         let gx = self.smooth(x + 1, y) - self.smooth(x - 1, y);
         let gy = self.smooth(x, y + 1) - self.smooth(x, y - 1);
         libm::sqrtf(gx * gx + gy * gy)
