@@ -205,14 +205,14 @@ impl<'a, 'b> BoxSums<'a, 'b> {
         }
         let side = CACHE_SIDE as u32;
         let slot = ((ky % side) * side + kx % side) as usize;
-        Some((slot, ((ky / side) << 8 | kx / side) as u16))
+        Some((slot, (((ky / side) << 8) | (kx / side)) as u16))
     }
 
     fn sum(&mut self, x: i32, y: i32) -> u32 {
         if let Some((slot, tag)) = Self::key(x, y) {
             if let Some(e) = self.sums.get_mut(slot) {
                 if (*e >> 16) as u16 != tag {
-                    *e = (tag as u32) << 16 | box_sum(self.img, x, y);
+                    *e = ((tag as u32) << 16) | box_sum(self.img, x, y);
                 }
                 return *e & 0xFFFF;
             }
