@@ -827,14 +827,22 @@ mod tests {
             state % m
         };
         LONG_CYCLES.with(|k| k.set(0));
-        for _ in 0..300 {
-            let (w, h) = (40 + next(160) as usize, 40 + next(160) as usize);
+        let scenes = if cfg!(miri) { 2 } else { 300 };
+        for _ in 0..scenes {
+            // Miri: two small scenes of few sweeps (the path, not the figure)
+            let side = if cfg!(miri) { 8 } else { 160 };
+            let (w, h) = (40 + next(side) as usize, 40 + next(side) as usize);
             let body_end = ((w as u64 * (20 + next(70)) / 100) as usize).max(1);
             let fin = (next(80) as usize, 1 + next(59) as usize, next(60) as u8);
             let px = random_scene(w, h, next(u64::MAX), body_end, fin);
             let img = ImageView::packed(&px, w, h).unwrap();
+            let iterations = if cfg!(miri) {
+                12
+            } else {
+                200 + next(60) as u16
+            };
             let p = SnakeParams {
-                iterations: 200 + next(60) as u16,
+                iterations,
                 ..SnakeParams::default()
             };
             let h_o = 4.0 + next(296) as f32;
@@ -860,7 +868,10 @@ mod tests {
             assert_eq!(fast, slow);
         }
         let long = LONG_CYCLES.with(|k| k.get());
-        assert!(long > 0, "no scene took the long-cycle shortcut");
+        assert!(
+            cfg!(miri) || long > 0,
+            "no scene took the long-cycle shortcut"
+        );
     }
 
     /// Background 20, a "fin" of grey 30 over x ∈ [60, 80), y ∈ [40, 60)
