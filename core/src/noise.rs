@@ -97,6 +97,7 @@ fn noise_hist(img: ImageView<'_>, hist: &mut [u32; 512]) -> u64 {
     // sample columns x = 0, L, …, with x + L ≤ w − 1: n of them, n + 1 u's
     let n = (w - 1) / L;
     let mut total = 0u64;
+    let mut others = [[0u32; 512]; 3];
     for y in (0..h - L).step_by(2 * L) {
         let (ra, rb) = (img.row(y), img.row(y + L));
         // u at x = 0, L, …, nL (< w): the first pixel of each L-chunk,
@@ -108,21 +109,47 @@ fn noise_hist(img: ImageView<'_>, hist: &mut [u32; 512]) -> u64 {
             continue;
         };
         let mut prev = a0 as i16 - b0 as i16;
-        // the L-chunks of the row from column L start at L, 2L, …, nL
+        // u at x = L, 2L, …, nL: every L-th pixel of the row from column L.
+        // Consecutive samples go to four histograms in turn (`hist` and
+        // `others`, folded in below): |d| is a few units on most of a
+        // frame, and increments of one counter in a row would each wait
+        // on the previous one's store
         let (ra, rb) = (ra.get(L..).unwrap_or(&[]), rb.get(L..).unwrap_or(&[]));
-        for (ca, cb) in ra.chunks(L).zip(rb.chunks(L)) {
-            let (Some(&a), Some(&b)) = (ca.first(), cb.first()) else {
-                break;
-            };
-            let u = a as i16 - b as i16;
-            if let Some(c) = hist.get_mut((prev - u).unsigned_abs() as usize) {
-                *c = c.wrapping_add(1);
-            }
-            total += 1;
-            prev = u;
+        let mut samples = ra.iter().step_by(L).zip(rb.iter().step_by(L));
+        let [o1, o2, o3] = &mut others;
+        while sample(&mut samples, &mut prev, hist)
+            && sample(&mut samples, &mut prev, o1)
+            && sample(&mut samples, &mut prev, o2)
+            && sample(&mut samples, &mut prev, o3)
+        {}
+        total += n as u64;
+    }
+    for o in others.iter() {
+        for (c, &v) in hist.iter_mut().zip(o.iter()) {
+            *c = c.wrapping_add(v);
         }
     }
     total
+}
+
+/// The next sample `(p(x, y), p(x, y + L))` of `samples` into `hist`
+/// (`|u(x − L) − u(x)|`, `prev` = u(x − L), then u(x)); false when none is
+/// left.
+#[inline(always)]
+fn sample<'a>(
+    samples: &mut impl Iterator<Item = (&'a u8, &'a u8)>,
+    prev: &mut i16,
+    hist: &mut [u32; 512],
+) -> bool {
+    let Some((&a, &b)) = samples.next() else {
+        return false;
+    };
+    let u = a as i16 - b as i16;
+    if let Some(c) = hist.get_mut((*prev - u).unsigned_abs() as usize) {
+        *c = c.wrapping_add(1);
+    }
+    *prev = u;
+    true
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! Criterion benches of the core stages on synthetic 2048 × 2048 frames
-//! (issue 8): mesh removal (Section V.A), the 7 × 7 gradient (III.A), the
+//! (issue 8): mesh removal (Section V.A), the frame noise estimate of the
+//! variance test (III.C), the 7 × 7 gradient (III.A), the
 //! gradient histogram + threshold, streaming labels, a whole-frame
 //! segmentation, the fixed-point remap (IV.A), the whole pipeline on a
 //! stereo pair and its length stage (IV.D) alone.
@@ -94,6 +95,9 @@ fn benches(c: &mut Criterion) {
     let (mut tmp, mut out) = (vec![0u8; W * H], vec![0u8; W * H]);
     g.bench_function("mesh_removal", |b| {
         b.iter(|| remove_mesh(black_box(lv), 7, &mut tmp, &mut out).unwrap())
+    });
+    g.bench_function("noise_sigma", |b| {
+        b.iter(|| fishtrack_core::noise::noise_sigma16(black_box(lv)))
     });
     let filtered = out.clone();
     let fv = ImageView::packed(&filtered, W, H).unwrap();

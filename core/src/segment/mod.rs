@@ -303,6 +303,10 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
     }
     let mut ws = workspace::Ws::carve(ws, w, h).ok_or(SegmentError::WorkspaceTooSmall)?;
     let mut stats = SegmentStats::default();
+    // the noise estimate first: it reads a quarter of the frame's rows,
+    // which the mesh removal then finds in cache (read after the coarse
+    // pass, they had left it)
+    stats.noise_sigma16 = crate::noise::noise_sigma16(img);
     let n_regions = coarse::coarse_regions(img, params, &mut ws, &mut stats)?;
     let n = w * h;
     let frame = ImageView::packed(&ws.filtered[..n], w, h).map_err(SegmentError::Image)?;
@@ -311,7 +315,6 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
     } else {
         None
     };
-    stats.noise_sigma16 = crate::noise::noise_sigma16(img);
     stats.var_limit = local::variance_limit(params, stats.noise_sigma16);
     for rw in ws.regions.iter().take(n_regions) {
         let region = coarse::decode_region(rw);
