@@ -302,11 +302,13 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
         return Err(SegmentError::FrameTooLarge);
     }
     let mut ws = workspace::Ws::carve(ws, w, h).ok_or(SegmentError::WorkspaceTooSmall)?;
-    let mut stats = SegmentStats::default();
     // the noise estimate first: it reads a quarter of the frame's rows,
     // which the mesh removal then finds in cache (read after the coarse
     // pass, they had left it)
-    stats.noise_sigma16 = crate::noise::noise_sigma16(img);
+    let mut stats = SegmentStats {
+        noise_sigma16: crate::noise::noise_sigma16(img),
+        ..SegmentStats::default()
+    };
     let n_regions = coarse::coarse_regions(img, params, &mut ws, &mut stats)?;
     let n = w * h;
     let frame = ImageView::packed(&ws.filtered[..n], w, h).map_err(SegmentError::Image)?;
