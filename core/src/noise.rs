@@ -100,8 +100,7 @@ fn noise_hist(img: ImageView<'_>, hist: &mut [u32; 512]) -> u64 {
     let mut others = [[0u32; 512]; 3];
     for y in (0..h - L).step_by(2 * L) {
         let (ra, rb) = (img.row(y), img.row(y + L));
-        // u at x = 0, L, …, nL (< w): the first pixel of each L-chunk,
-        // the last chunk possibly short
+        // u at x = 0, L, …, nL (< w): the rows' first n·L + 1 pixels
         let (Some(ra), Some(rb)) = (ra.get(..n * L + 1), rb.get(..n * L + 1)) else {
             continue;
         };

@@ -22,17 +22,16 @@
 //! region would, it extends the body to the region's far end along the axis.
 //! The caller recomputes the end point from [`SnakeResult::far_t`].
 //!
-//! Memory bound: `SNAKE_POINTS` points, a 512-sample ring, 8 remembered
-//! contours, the hashes of the last 64 (512 B) and a 64 × 64 torus of
-//! memoised 5 × 5 box sums and gradients (40 KiB) on the stack. Work: at most
-//! `iterations · SNAKE_POINTS · (2k+1)²` candidates of a memoised sum
-//! and gradient each, 25 pixel reads per distinct pixel the contour visits, and about 5
-//! per pixel of the final contour's box (scan conversion with sliding box
-//! sums). A sweep is a function of the contour alone, so a contour that
-//! repeats one of the last 8 sweeps ends the loop, and one whose hash
-//! repeats one of the last 64 ends it once the repeat is confirmed on the
-//! contour itself: the final contour of a cycle is known without running
-//! the rest. On the default hauls every snake that runs reaches the sweep
+//! Memory bound: `SNAKE_POINTS` points, a 512-sample ring, the hashes of
+//! the last 64 contours (512 B), one contour under test and a 64 × 64 torus
+//! of memoised 5 × 5 box sums and gradients (40 KiB) on the stack. Work: at
+//! most `iterations · SNAKE_POINTS · (2k+1)²` candidates of a memoised sum
+//! and gradient each, 25 pixel reads per distinct pixel the contour
+//! visits, and about 5 per pixel of the final contour's box (scan
+//! conversion with sliding box sums). A sweep is a function of the contour
+//! alone, so a contour whose hash repeats one of the last 64 ends the loop
+//! once the repeat is confirmed on the contour itself: the final contour of
+//! a cycle is known without running the rest. On the default hauls every snake that runs reaches the sweep
 //! bound, and about half of them do so in cycles of period 12–56.
 
 use crate::image::{ImageView, Roi};
@@ -40,17 +39,15 @@ use crate::image::{ImageView, Roi};
 /// Number of contour points.
 pub const SNAKE_POINTS: usize = 32;
 
-/// Sweeps remembered to detect a contour that cycles (periods 2..=8).
-const HISTORY: usize = 8;
-
-/// Sweeps whose contour hashes are remembered to detect longer cycles
-/// (periods `HISTORY + 1 ..= LONG_HISTORY − 1`, each confirmed on the
-/// contour itself before it is trusted).
-const LONG_HISTORY: usize = 64;
+/// Sweeps whose contour hashes are remembered to detect a contour that
+/// cycles (periods `2 ..= HISTORY − 1`, each confirmed on the contour
+/// itself before it is trusted).
+const HISTORY: usize = 64;
 
 #[cfg(test)]
 std::thread_local! {
-    /// Long cycles confirmed on this thread (the tests check the path runs).
+    /// Cycles of period > 8 confirmed on this thread (the tests check that
+    /// long periods are exercised).
     static LONG_CYCLES: core::cell::Cell<u32> = const { core::cell::Cell::new(0) };
 }
 
@@ -383,18 +380,15 @@ pub fn tail_snake(
     let mut sums = BoxSums::new(img);
     let limit = p.iterations.min(1000);
     let mut sweeps = 0;
-    // the contour after each of the last HISTORY sweeps (`hist[n % HISTORY]`
-    // holds it after sweep n; sweep 0 is the starting circle)
-    let mut hist = [[(0.0f32, 0.0f32); SNAKE_POINTS]; HISTORY];
-    hist[0] = pts;
-    // hashes of the contours after the last LONG_HISTORY sweeps
-    let mut hashes = [0u64; LONG_HISTORY];
+    // hashes of the contours after the last HISTORY sweeps (`hashes[n %
+    // HISTORY]` after sweep n; sweep 0 is the starting circle)
+    let mut hashes = [0u64; HISTORY];
     if let Some(h0) = hashes.first_mut() {
         *h0 = contour_hash(&pts);
     }
-    // a long cycle under test: (sweep, period, contour after that sweep)
+    // a cycle under test: (sweep, period, contour after that sweep)
     let mut pending: Option<(usize, usize, Contour)> = None;
-    // once a long cycle is confirmed: the sweep whose contour is the last one's
+    // once a cycle is confirmed: the sweep whose contour is the last one's
     let mut stop_at: Option<usize> = None;
     for _ in 0..limit {
         if stop_at == Some(sweeps as usize) {
@@ -492,26 +486,12 @@ pub fn tail_snake(
         }
         // A sweep is a function of the contour alone (the image, end and
         // level are fixed), so once the contour repeats the one of `per`
-        // sweeps ago it cycles with period `per` for good: the contour
-        // after the last sweep is known without running the rest.
+        // sweeps ago it cycles with period `per` for good. Cycles are found
+        // by hash and confirmed on the contour: when the contour after
+        // sweep n0 recurs after sweep n0 + per, the last sweep's contour is
+        // the one (limit − n) mod per sweeps after this one, and the rest
+        // need not run.
         let n = sweeps as usize;
-        for per in 2..=HISTORY.min(n) {
-            if hist[(n - per) % HISTORY] == pts {
-                let a = n - per;
-                let k = a + (limit as usize - a) % per;
-                pts = hist[k % HISTORY];
-                sweeps = limit;
-                break;
-            }
-        }
-        if sweeps == limit {
-            break;
-        }
-        hist[n % HISTORY] = pts;
-        // Longer cycles, found by hash and confirmed on the contour: when
-        // the contour after sweep n0 recurs after sweep n0 + per, it cycles
-        // with period per from n0 on, so the last sweep's contour is the
-        // one (limit − n) mod per sweeps after this one.
         if stop_at.is_none() {
             let hc = contour_hash(&pts);
             if let Some((n0, per, c)) = pending {
@@ -520,19 +500,21 @@ pub fn tail_snake(
                     if c == pts {
                         stop_at = Some(n + (limit as usize - n) % per);
                         #[cfg(test)]
-                        LONG_CYCLES.with(|k| k.set(k.get() + 1));
+                        if per > 8 {
+                            LONG_CYCLES.with(|k| k.set(k.get() + 1));
+                        }
                     }
                 }
             }
             if pending.is_none() && stop_at.is_none() {
-                for per in HISTORY + 1..LONG_HISTORY.min(n + 1) {
-                    if hashes.get((n - per) % LONG_HISTORY) == Some(&hc) {
+                for per in 2..HISTORY.min(n + 1) {
+                    if hashes.get((n - per) % HISTORY) == Some(&hc) {
                         pending = Some((n, per, pts));
                         break;
                     }
                 }
             }
-            if let Some(hn) = hashes.get_mut(n % LONG_HISTORY) {
+            if let Some(hn) = hashes.get_mut(n % HISTORY) {
                 *hn = hc;
             }
         }
@@ -612,15 +594,10 @@ fn row_crossings(pts: &[(f32, f32); SNAKE_POINTS], y: f32, out: &mut [f32; SNAKE
         }
         j = i;
     }
-    let xs = out.get_mut(..n).unwrap_or(&mut []);
-    // insertion sort: at most 32 values
-    for k in 1..xs.len() {
-        let mut m = k;
-        while m > 0 && xs[m - 1] > xs[m] {
-            xs.swap(m - 1, m);
-            m -= 1;
-        }
-    }
+    // ascending (no NaN here; ±0 in either order count alike below)
+    out.get_mut(..n)
+        .unwrap_or(&mut [])
+        .sort_unstable_by(f32::total_cmp);
     n
 }
 
