@@ -589,12 +589,12 @@ pub fn remove_mesh(
 }
 
 /// Scratch bytes of [`remove_mesh_fused`] for rows of `width` pixels and
-/// lines of `len` pixels: four rings of `2·(len/2) + 1` sheared rows, two
-/// identity rows and one output row of [`mesh_row_len`] bytes each, plus
+/// lines of `len` pixels: four rings of [`mesh_ring`] sheared rows, two
+/// identity rows and two output rows of [`mesh_row_len`] bytes each, plus
 /// 15 bytes to align them to 16.
 pub const fn mesh_scratch_len(width: usize, len: usize) -> usize {
     let half = mesh_half(len);
-    (4 * (2 * half + 1) + 3) * mesh_row_len(width, half) + (MESH_ALIGN - 1)
+    (4 * mesh_ring(half) + 4) * mesh_row_len(width, half) + (MESH_ALIGN - 1)
 }
 
 /// `len / 2`, at most `MAX_SE / 2`.
@@ -606,19 +606,26 @@ const fn mesh_half(len: usize) -> usize {
     }
 }
 
+/// Rows per ring of [`remove_mesh_fused`]: a stage reads the `len + 1`
+/// rows of its pair of output rows while the stage before it is
+/// `⌈half/2⌉` pairs ahead, `2⌈half/2⌉ + half + 2 ≤ len + 2` rows in all.
+const fn mesh_ring(half: usize) -> usize {
+    2 * half + 3
+}
+
 /// Alignment of the sheared rows of [`remove_mesh_fused`]: one SSE/NEON
 /// register, so every block read can be an aligned memory operand.
 const MESH_ALIGN: usize = 16;
 
 /// Left padding of a sheared row: image column `c` of row `y` is at byte
 /// `MESH_PAD + c + shear(y)`, `shear < 16`, and the reads of a block start
-/// up to `half + 15` columns left of column 0.
+/// up to `half + 16` columns left of column 0.
 const fn mesh_pad(half: usize) -> usize {
     half + MESH_ALIGN
 }
 
 /// Bytes per sheared row (a multiple of [`MESH_ALIGN`]): the padding, the
-/// row, its shear, and the blocks' overrun of up to 15 + 31 columns on
+/// row, its shear, and the blocks' overrun of up to 15 + 33 columns on
 /// the right.
 const fn mesh_row_len(width: usize, half: usize) -> usize {
     (mesh_pad(half) + width + half + 64).div_ceil(MESH_ALIGN) * MESH_ALIGN
@@ -637,9 +644,9 @@ fn mesh_shear(y: usize, dir: Diagonal) -> usize {
 /// [`remove_mesh`] in one streaming pass over the frame (identical
 /// output): the four line operators (erosion and dilation along the main
 /// diagonal, then along the anti-diagonal) are chained through rings of
-/// `len` rows each, so every intermediate row is made once, read `len`
-/// times while it is in cache, and the frame is read once and written
-/// once. Rows outside the image are an identity row (255 before an
+/// [`mesh_ring`] rows each, so every intermediate row is made once, read
+/// `len + 1` times while it is in cache, and the frame is read once and
+/// written once. Rows outside the image are an identity row (255 before an
 /// erosion, 0 before a dilation) and ring rows carry padding holding the
 /// reader's identity: the OpenCV border convention (outside pixels
 /// ignored) without a border case. Lines of fewer than 3 pixels are the
@@ -653,9 +660,16 @@ fn mesh_shear(y: usize, dir: Diagonal) -> usize {
 /// alignment goes: all `len` inputs of a 32-pixel block start on the same
 /// 16-byte boundary. Every input is then an aligned memory operand of the
 /// min/max instruction (one instruction per input and 16 pixels instead of
-/// a load and a min/max), and an output row is `⌈(w + 15)/32⌉` whole
-/// blocks with no tail case; the few columns computed left and right of
-/// the row land in the next ring's padding and are reset to the identity.
+/// a load and a min/max), and an output row is whole blocks with no tail
+/// case; the few columns computed left and right of the row land in the
+/// next ring's padding and are reset to the identity.
+///
+/// **Rows in pairs.** Output pixel `(x, y)` and its diagonal neighbour
+/// `(x ± 1, y + 1)` share `len − 1` of their `len` inputs — the same bytes
+/// of the same sheared rows — so each stage makes two rows at once: the
+/// op of the shared inputs, then each row's own end input. That is
+/// `(len + 1)/2` reads and ops per output pixel instead of `len` (4 instead
+/// of 7 for Table I's lines); the loads were what bounded the pass.
 pub fn remove_mesh_fused(
     src: ImageView<'_>,
     len: usize,
@@ -673,7 +687,7 @@ pub fn remove_mesh_fused(
         }
         return Ok(());
     }
-    let k = 2 * half + 1;
+    let rr = mesh_ring(half);
     let l = mesh_row_len(w, half);
     let pad = mesh_pad(half);
     let scratch = scratch
@@ -687,29 +701,41 @@ pub fn remove_mesh_fused(
         .align_offset(MESH_ALIGN)
         .min(MESH_ALIGN - 1);
     let scratch = scratch
-        .get_mut(skip..skip + (4 * k + 3) * l)
+        .get_mut(skip..skip + (4 * rr + 4) * l)
         .ok_or(MorphError::ScratchTooSmall)?;
-    let (r0, rest) = scratch.split_at_mut(k * l);
-    let (r1, rest) = rest.split_at_mut(k * l);
-    let (r2, rest) = rest.split_at_mut(k * l);
-    let (r3, rest) = rest.split_at_mut(k * l);
+    let (r0, rest) = scratch.split_at_mut(rr * l);
+    let (r1, rest) = rest.split_at_mut(rr * l);
+    let (r2, rest) = rest.split_at_mut(rr * l);
+    let (r3, rest) = rest.split_at_mut(rr * l);
     let (id_min, rest) = rest.split_at_mut(l);
-    let (id_max, row) = rest.split_at_mut(l);
+    let (id_max, rows) = rest.split_at_mut(l);
     id_min.fill(255);
     id_max.fill(0);
     let (id_min, id_max) = (&*id_min, &*id_max);
-    let g = MeshGeom { w, h, half, l, pad };
+    let g = MeshGeom {
+        w,
+        h,
+        half,
+        l,
+        pad,
+        ring: rr,
+    };
     let fail = MorphError::ScratchTooSmall;
-    // stage s (1..=4) makes its row t − s·half at step t, after stage s − 1
-    // made the row it needs last (t − (s − 1)·half = its row + half)
-    for t in 0..h + 4 * half {
-        if t < h {
-            let at = (t % k) * l + pad + mesh_shear(t, Diagonal::Main);
-            let d = r0.get_mut(at..at + w).ok_or(fail)?;
-            d.copy_from_slice(src.row(t));
-            g.reset_border(r0, at, false).ok_or(fail)?;
+    // step p: source rows 2p, 2p + 1 into the first ring, then stage s
+    // (1..=4) makes its pair of rows 2j, 2j + 1 with j = p − s·c: stage
+    // s − 1 has then made its rows up to 2j + 2c + 1 ≥ 2j + 1 + half, all
+    // that the pair reads (rows past the image are identity)
+    let c = half.div_ceil(2);
+    for p in 0..h.div_ceil(2) + 4 * c {
+        for t in [2 * p, 2 * p + 1] {
+            if t < h {
+                let at = (t % rr) * l + pad + mesh_shear(t, Diagonal::Main);
+                let d = r0.get_mut(at..at + w).ok_or(fail)?;
+                d.copy_from_slice(src.row(t));
+                g.reset_border(r0, at, false).ok_or(fail)?;
+            }
         }
-        let row_of = |s: usize| (t + half).checked_sub(s * half + half).filter(|&y| y < h);
+        let row_of = |s: usize| p.checked_sub(s * c).map(|j| 2 * j).filter(|&y| y < h);
         if let Some(y) = row_of(1) {
             g.stage::<false>(r0, id_min, y, Diagonal::Main, r1, Some(Diagonal::Main))
                 .ok_or(fail)?;
@@ -723,13 +749,16 @@ pub fn remove_mesh_fused(
                 .ok_or(fail)?;
         }
         if let Some(y) = row_of(4) {
-            g.stage::<true>(r3, id_max, y, Diagonal::Anti, row, None)
+            let ms = g
+                .stage::<true>(r3, id_max, y, Diagonal::Anti, rows, None)
                 .ok_or(fail)?;
-            let m = g.lead(y, Diagonal::Anti);
-            let o = out
-                .get_mut(y * w..(y + 1) * w)
-                .ok_or(MorphError::DstTooSmall)?;
-            o.copy_from_slice(row.get(m..m + w).ok_or(fail)?);
+            for (i, m) in ms.iter().enumerate() {
+                let (Some(m), yy) = (*m, y + i) else { continue };
+                let o = out
+                    .get_mut(yy * w..(yy + 1) * w)
+                    .ok_or(MorphError::DstTooSmall)?;
+                o.copy_from_slice(rows.get(i * l + m..i * l + m + w).ok_or(fail)?);
+            }
         }
     }
     Ok(())
@@ -744,6 +773,8 @@ struct MeshGeom {
     l: usize,
     /// [`mesh_pad`].
     pad: usize,
+    /// Rows per ring ([`mesh_ring`]).
+    ring: usize,
 }
 
 impl MeshGeom {
@@ -774,13 +805,15 @@ impl MeshGeom {
         Some(())
     }
 
-    /// Row `y` of the line operator along `dir` on the sheared rows of
-    /// `ring` (row `y'` in slot `y' mod len`, `identity` outside `0..h`),
-    /// written as whole 32-byte blocks into `next`'s slot of row `y`,
-    /// sheared for `next_dir` with its border reset to the next reader's
-    /// identity, or (`next_dir` `None`) into the single row `next`, column
-    /// `c` at byte `c + lead`. `None` if a slice did not fit (cannot
-    /// happen with the scratch laid out by [`remove_mesh_fused`]).
+    /// Rows `y` and `y + 1` (only `y` when `y + 1 = h`) of the line
+    /// operator along `dir` on the sheared rows of `ring` (row `y'` in slot
+    /// `y' mod ring`, `identity` outside `0..h`), written as whole 32-byte
+    /// blocks into their slots of `next`, sheared for `next_dir` with their
+    /// borders reset to the next reader's identity, or (`next_dir` `None`)
+    /// into the two rows of `next` (`l` bytes apart), column `c` at byte
+    /// `c + m` of its row: the `m` of each row is returned. `None` if a
+    /// slice did not fit (cannot happen with the scratch laid out by
+    /// [`remove_mesh_fused`]).
     fn stage<const MAX: bool>(
         &self,
         ring: &[u8],
@@ -789,8 +822,79 @@ impl MeshGeom {
         dir: Diagonal,
         next: &mut [u8],
         next_dir: Option<Diagonal>,
-    ) -> Option<()> {
-        let (half, l) = (self.half, self.l);
+    ) -> Option<[Option<usize>; 2]> {
+        let (half, l, rr) = (self.half, self.l, self.ring);
+        let k = 2 * half + 1;
+        let two = y + 1 < self.h && matches!(k, 3 | 5 | 7);
+        if !two {
+            let m = self.stage_one::<MAX>(ring, identity, y, dir, next, next_dir)?;
+            let m2 = if y + 1 < self.h {
+                let n2 = match next_dir {
+                    Some(_) => &mut *next,
+                    None => next.get_mut(l..)?,
+                };
+                Some(self.stage_one::<MAX>(ring, identity, y + 1, dir, n2, next_dir)?)
+            } else {
+                None
+            };
+            return Some([Some(m), m2]);
+        }
+        // row y from x0 = −m, row y + 1 from x0 + s: the same input bytes
+        // (for s = 1 and m = 0 one block earlier, so that row y + 1 starts
+        // at or left of column 0)
+        let m0 = self.lead(y, dir);
+        let m = if dir == Diagonal::Main && m0 == 0 {
+            MESH_ALIGN
+        } else {
+            m0
+        };
+        let m1 = match dir {
+            Diagonal::Main => m - 1,
+            Diagonal::Anti => m + 1,
+        };
+        let nb = (self.w + m + 1).div_ceil(BLOCK);
+        let ring: &[u128] = bytemuck::try_cast_slice(ring).ok()?;
+        let identity: &[u128] = bytemuck::try_cast_slice(identity).ok()?;
+        let (pa, pb) = match next_dir {
+            Some(nd) => (
+                (y % rr) * l + self.pad + mesh_shear(y, nd) - m,
+                ((y + 1) % rr) * l + self.pad + mesh_shear(y + 1, nd) - m1,
+            ),
+            None => (0, l),
+        };
+        let src = MeshSrc {
+            ring,
+            identity,
+            y,
+            base: self.pad - m,
+            n16: nb * (BLOCK / MESH_ALIGN),
+            dir,
+        };
+        let (a, b) = two_rows(next, pa, pb, nb * BLOCK)?;
+        match k {
+            3 => reduce_pair::<MAX, 4>(a, b, &self.inputs::<4>(&src, 4)?)?,
+            5 => reduce_pair::<MAX, 6>(a, b, &self.inputs::<6>(&src, 6)?)?,
+            _ => reduce_pair::<MAX, 8>(a, b, &self.inputs::<8>(&src, 8)?)?,
+        }
+        if next_dir.is_some() {
+            // an erosion's output is read by a dilation and vice versa
+            self.reset_border(next, pa + m, !MAX)?;
+            self.reset_border(next, pb + m1, !MAX)?;
+        }
+        Some([Some(m), Some(m1)])
+    }
+
+    /// Row `y` alone (see [`MeshGeom::stage`]); its `m`.
+    fn stage_one<const MAX: bool>(
+        &self,
+        ring: &[u8],
+        identity: &[u8],
+        y: usize,
+        dir: Diagonal,
+        next: &mut [u8],
+        next_dir: Option<Diagonal>,
+    ) -> Option<usize> {
+        let (half, l, rr) = (self.half, self.l, self.ring);
         let k = 2 * half + 1;
         let m = self.lead(y, dir);
         // blocks cover columns x0 .. x0 + 32·nb ⊇ 0 .. w; in u128 units
@@ -802,7 +906,7 @@ impl MeshGeom {
         // column x0 of row y: in the next ring's slot, sheared for its
         // reader; in the output row, byte 0
         let at = match next_dir {
-            Some(nd) => (y % k) * l + self.pad + mesh_shear(y, nd) - m,
+            Some(nd) => (y % rr) * l + self.pad + mesh_shear(y, nd) - m,
             None => 0,
         };
         let out = next.get_mut(at..at + nb * BLOCK)?;
@@ -815,16 +919,28 @@ impl MeshGeom {
             dir,
         };
         match k {
-            3 => reduce_aligned::<MAX, 3>(out, &self.inputs::<3>(&src)?)?,
-            5 => reduce_aligned::<MAX, 5>(out, &self.inputs::<5>(&src)?)?,
-            7 => reduce_aligned::<MAX, 7>(out, &self.inputs::<7>(&src)?)?,
-            _ => reduce_aligned_dyn::<MAX>(out, &self.inputs::<{ MAX_SE }>(&src)?[..k])?,
+            3 => reduce_aligned::<MAX, 3>(out, &self.inputs::<3>(&src, 3)?)?,
+            5 => reduce_aligned::<MAX, 5>(out, &self.inputs::<5>(&src, 5)?)?,
+            7 => reduce_aligned::<MAX, 7>(out, &self.inputs::<7>(&src, 7)?)?,
+            _ => reduce_aligned_dyn::<MAX>(out, &self.inputs::<{ MAX_SE }>(&src, k)?[..k])?,
         }
         if next_dir.is_some() {
             // an erosion's output is read by a dilation and vice versa
             self.reset_border(next, at + m, !MAX)?;
         }
-        Some(())
+        Some(m)
+    }
+}
+
+/// The disjoint `n`-byte parts of `buf` at `a` and at `b`.
+fn two_rows(buf: &mut [u8], a: usize, b: usize, n: usize) -> Option<(&mut [u8], &mut [u8])> {
+    if a < b {
+        let (lo, hi) = buf.split_at_mut(b);
+        Some((lo.get_mut(a..a + n)?, hi.get_mut(..n)?))
+    } else {
+        let (lo, hi) = buf.split_at_mut(a);
+        let (b_part, a_part) = (lo.get_mut(b..b + n)?, hi.get_mut(..n)?);
+        Some((a_part, b_part))
     }
 }
 
@@ -841,24 +957,24 @@ struct MeshSrc<'a> {
 }
 
 impl MeshGeom {
-    /// The first `min(K, len)` inputs of output row `src.y` (rows
-    /// `y − half ..= y + half`, shifted along the diagonal; identity rows
-    /// outside the image), `n16` aligned words each; the rest empty.
+    /// The first `n ≤ K` inputs of output row `src.y` and the row after it
+    /// (rows `y − half ..= y − half + n − 1`, shifted along the diagonal;
+    /// identity rows outside the image), `n16` aligned words each; the
+    /// rest empty.
     #[inline(always)]
-    fn inputs<'a, const K: usize>(&self, src: &MeshSrc<'a>) -> Option<[&'a [u128]; K]> {
-        let (half, l) = (self.half, self.l);
-        let k = 2 * half + 1;
+    fn inputs<'a, const K: usize>(&self, src: &MeshSrc<'a>, n: usize) -> Option<[&'a [u128]; K]> {
+        let (half, l, rr) = (self.half, self.l, self.ring);
         let identity = src.identity.get(..src.n16)?;
         let mut srcs: [&[u128]; K] = [&[]; K];
         // input i: column x0 + s·(i − half) of row y' = y − half + i, at
         // byte pad − m + s·(i − half) + shear(y'), a multiple of 16; the
-        // slot of row y' is (y + half + 1 + i) mod k, stepped
-        let mut slot = (src.y + half + 1) % k;
-        for (i, sl) in srcs.iter_mut().take(k).enumerate() {
+        // slot of row y' is (y − half + i) mod ring, stepped
+        let mut slot = (src.y + rr - half) % rr;
+        for (i, sl) in srcs.iter_mut().take(n).enumerate() {
             let yy = (src.y + i).wrapping_sub(half);
             *sl = if yy < self.h {
                 let at = match src.dir {
-                    Diagonal::Main => src.base + i - half,
+                    Diagonal::Main => (src.base + i).checked_sub(half)?,
                     Diagonal::Anti => src.base + half - i,
                 } + mesh_shear(yy, src.dir);
                 let s = (slot * l + at) / MESH_ALIGN;
@@ -866,7 +982,7 @@ impl MeshGeom {
             } else {
                 identity
             };
-            slot = if slot + 1 == k { 0 } else { slot + 1 };
+            slot = if slot + 1 == rr { 0 } else { slot + 1 };
         }
         Some(srcs)
     }
@@ -905,6 +1021,62 @@ fn reduce_aligned<const MAX: bool, const K: usize>(out: &mut [u8], r: &[&[u128];
             }
         }
         *o = acc;
+    }
+    Some(())
+}
+
+/// Two output rows from `K` inputs (see [`remove_mesh_fused`], "Rows in
+/// pairs"): `a` = the op of inputs `0..K−1`, `b` = the op of inputs
+/// `1..K`, block-wise, the `K − 2` shared inputs combined once; `None` if
+/// an input is short or the rows differ in length.
+#[inline(never)]
+fn reduce_pair<const MAX: bool, const K: usize>(
+    a: &mut [u8],
+    b: &mut [u8],
+    r: &[&[u128]; K],
+) -> Option<()> {
+    let oa: &mut [[u8; BLOCK]] = bytemuck::try_cast_slice_mut(a).ok()?;
+    let ob: &mut [[u8; BLOCK]] = bytemuck::try_cast_slice_mut(b).ok()?;
+    let n = oa.len();
+    if K < 3 || ob.len() != n {
+        return None;
+    }
+    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| {
+        r.get(j)
+            .and_then(|s| bytemuck::try_cast_slice(s.get(..2 * n)?).ok())
+            .unwrap_or(&[])
+    });
+    if bl.iter().any(|b| b.len() < n) {
+        return None;
+    }
+    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| &bl[j][..n]);
+    let (first, rest) = bl.split_first()?;
+    let (last, mid) = rest.split_last()?;
+    let (m0, mid) = mid.split_first()?;
+    for (i, ((oa, ob), (f, z))) in oa
+        .iter_mut()
+        .zip(ob.iter_mut())
+        .zip(first.iter().zip(*last))
+        .enumerate()
+    {
+        let mut acc: [u8; BLOCK] = *bytemuck::cast_ref::<[u128; 2], [u8; BLOCK]>(&m0[i]);
+        for c in mid {
+            let v = bytemuck::cast_ref::<[u128; 2], [u8; BLOCK]>(&c[i]);
+            for j in 0..BLOCK {
+                acc[j] = op::<MAX>(acc[j], v[j]);
+            }
+        }
+        let f = bytemuck::cast_ref::<[u128; 2], [u8; BLOCK]>(f);
+        let z = bytemuck::cast_ref::<[u128; 2], [u8; BLOCK]>(z);
+        let mut xa = acc;
+        for j in 0..BLOCK {
+            xa[j] = op::<MAX>(xa[j], f[j]);
+        }
+        for j in 0..BLOCK {
+            acc[j] = op::<MAX>(acc[j], z[j]);
+        }
+        *oa = xa;
+        *ob = acc;
     }
     Some(())
 }
