@@ -988,6 +988,26 @@ impl MeshGeom {
     }
 }
 
+/// The `K` inputs cut to exactly `n` 32-byte blocks each, or `None` if
+/// one is short: the loops over them then carry no bounds checks, and
+/// reading a block through `[u128; 2]` tells the compiler it is 16-byte
+/// aligned (memory operands of pminub / pmaxub).
+#[inline(always)]
+fn aligned_blocks<'a, const K: usize>(
+    r: &[&'a [u128]; K],
+    n: usize,
+) -> Option<[&'a [[u128; 2]]; K]> {
+    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| {
+        r.get(j)
+            .and_then(|s| bytemuck::try_cast_slice(s.get(..2 * n)?).ok())
+            .unwrap_or(&[])
+    });
+    if bl.iter().any(|b| b.len() < n) {
+        return None;
+    }
+    Some(core::array::from_fn(|j| &bl[j][..n]))
+}
+
 /// `out` (32-byte blocks) = the op of the first `K` inputs (16-byte words,
 /// two per block), block-wise; `None` if there are fewer inputs or one is
 /// short.
@@ -998,19 +1018,7 @@ fn reduce_aligned<const MAX: bool, const K: usize>(out: &mut [u8], r: &[&[u128];
     if K == 0 || r.len() < K {
         return None;
     }
-    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| {
-        r.get(j)
-            .and_then(|s| bytemuck::try_cast_slice(s.get(..2 * n)?).ok())
-            .unwrap_or(&[])
-    });
-    if bl.iter().any(|b| b.len() < n) {
-        return None;
-    }
-    // every input exactly n blocks long (checked above), so the loop
-    // below has no bounds checks; reading a block through `[u128; 2]`
-    // tells the compiler it is 16-byte aligned (memory operands of
-    // pminub / pmaxub)
-    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| &bl[j][..n]);
+    let bl = aligned_blocks(r, n)?;
     let (first, rest) = bl.split_first()?;
     for (i, (o, a)) in ob.iter_mut().zip(*first).enumerate() {
         let mut acc: [u8; BLOCK] = *bytemuck::cast_ref::<[u128; 2], [u8; BLOCK]>(a);
@@ -1041,15 +1049,7 @@ fn reduce_pair<const MAX: bool, const K: usize>(
     if K < 3 || ob.len() != n {
         return None;
     }
-    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| {
-        r.get(j)
-            .and_then(|s| bytemuck::try_cast_slice(s.get(..2 * n)?).ok())
-            .unwrap_or(&[])
-    });
-    if bl.iter().any(|b| b.len() < n) {
-        return None;
-    }
-    let bl: [&[[u128; 2]]; K] = core::array::from_fn(|j| &bl[j][..n]);
+    let bl = aligned_blocks(r, n)?;
     let (first, rest) = bl.split_first()?;
     let (last, mid) = rest.split_last()?;
     let (m0, mid) = mid.split_first()?;
