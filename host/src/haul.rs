@@ -161,6 +161,34 @@ impl Haul {
         pair: &FramePair,
         expected_size: Option<(u32, u32)>,
     ) -> Result<(GrayImage, GrayImage), InputError> {
+        let (l, r, sixteen) = self.load_pair_quiet(pair, expected_size)?;
+        if let Some(path) = sixteen {
+            self.warn_16bit(path);
+        }
+        Ok((l, r))
+    }
+
+    /// The one 16-bit warning of the haul, naming `path`; later calls are
+    /// silent. Callers that load pairs out of order (in parallel) call it
+    /// themselves, for the first 16-bit file in frame order, so the
+    /// warning names the same file on every run.
+    pub fn warn_16bit(&self, path: &Path) {
+        if !self.warned_16bit.swap(true, AtomicOrdering::Relaxed) {
+            log::warn!(
+                "{}: 16-bit frame scaled to 8 bits (>> 8); further 16-bit frames of {} are converted the same way without a warning",
+                path.display(),
+                self.dir.display()
+            );
+        }
+    }
+
+    /// [`Haul::load_pair`] without the warning: the third value is the
+    /// 16-bit file of the pair (left first), if any, for [`Haul::warn_16bit`].
+    pub fn load_pair_quiet<'p>(
+        &self,
+        pair: &'p FramePair,
+        expected_size: Option<(u32, u32)>,
+    ) -> Result<(GrayImage, GrayImage, Option<&'p Path>), InputError> {
         let frame = |e: InputError| InputError {
             location: e.location,
             message: format!("frame {}: {}", pair.index, e.message),
@@ -169,16 +197,11 @@ impl Haul {
         let (l, r) = rayon::join(|| decode_gray(&pair.left), || decode_gray(&pair.right));
         let (l, l16) = l.map_err(frame)?;
         let (r, r16) = r.map_err(frame)?;
-        if l16 || r16 {
-            let path = if l16 { &pair.left } else { &pair.right };
-            if !self.warned_16bit.swap(true, AtomicOrdering::Relaxed) {
-                log::warn!(
-                    "{}: 16-bit frame scaled to 8 bits (>> 8); further 16-bit frames of {} are converted the same way without a warning",
-                    path.display(),
-                    self.dir.display()
-                );
-            }
-        }
+        let sixteen = match (l16, r16) {
+            (true, _) => Some(pair.left.as_path()),
+            (false, true) => Some(pair.right.as_path()),
+            _ => None,
+        };
         if l.dimensions() != r.dimensions() {
             return Err(InputError::file(
                 &pair.left,
@@ -206,7 +229,7 @@ impl Haul {
                 ));
             }
         }
-        Ok((l, r))
+        Ok((l, r, sixteen))
     }
 }
 

@@ -191,14 +191,20 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
         .validate()
         .map_err(|e| InputError::plain("parameters", format!("{e}")))?;
     // the cameras' column offsets, from frames spread over the haul
-    let pairs: Vec<(GrayImage, GrayImage)> = {
+    // (decoded in parallel; the 16-bit warning names the first such file in
+    // frame order, so it is the same on every run)
+    let pairs: Vec<(GrayImage, GrayImage, Option<&std::path::Path>)> = {
         use rayon::prelude::*;
         crate::columns::spread(haul.frames.len(), crate::columns::SAMPLE_FRAMES)
             .into_par_iter()
-            .map(|i| haul.load_pair(&haul.frames[i], Some((width, height))))
+            .map(|i| haul.load_pair_quiet(&haul.frames[i], Some((width, height))))
             .collect::<Result<_, _>>()?
     };
-    let (lefts, rights): (Vec<GrayImage>, Vec<GrayImage>) = pairs.into_iter().unzip();
+    if let Some(path) = pairs.iter().find_map(|p| p.2) {
+        haul.warn_16bit(path);
+    }
+    let (lefts, rights): (Vec<GrayImage>, Vec<GrayImage>) =
+        pairs.into_iter().map(|(l, r, _)| (l, r)).unzip();
     let columns = [
         ColumnOffsets::estimate(&lefts),
         ColumnOffsets::estimate(&rights),
