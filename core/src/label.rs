@@ -351,6 +351,140 @@ pub fn label_components_in(
     Ok(next)
 }
 
+/// Run-table capacity (runs) that [`label_runs_in`] may need for a mask
+/// whose row `y` is nonzero only in `len(y)` columns: at most one run per
+/// two columns, rounded up, per row — so `(Σ len + rows) / 2` bounds it.
+pub const fn run_capacity(pixels: usize, rows: usize) -> usize {
+    (pixels + rows).div_ceil(2)
+}
+
+/// Columns `x0..x1` of a packed run word of [`label_runs_in`].
+#[inline]
+pub fn run_span(word: i32) -> core::ops::Range<usize> {
+    let w = word as u32;
+    (w & 0xffff) as usize..(w >> 16) as usize
+}
+
+/// Root of run `i` in a run union-find (`v < 0` root of `−v` pixels,
+/// `v > 0` parent run `v − 1`, always an earlier run); path halving.
+#[inline]
+fn find_run_root(runs: &mut [[i32; 2]], mut i: usize) -> Option<usize> {
+    loop {
+        let v = runs.get(i)?[1];
+        if v < 0 {
+            return Some(i);
+        }
+        let p = (v as usize).checked_sub(1).filter(|&p| p < i)?;
+        let pv = runs.get(p)?[1];
+        if pv < 0 {
+            return Some(p);
+        }
+        let g = (pv as usize).checked_sub(1).filter(|&g| g < p)?;
+        runs[i][1] = pv; // parent ← grandparent (still an earlier run)
+        i = g;
+    }
+}
+
+#[inline]
+fn union_runs(runs: &mut [[i32; 2]], a: usize, b: usize) {
+    let (Some(ra), Some(rb)) = (find_run_root(runs, a), find_run_root(runs, b)) else {
+        return;
+    };
+    if ra == rb {
+        return;
+    }
+    let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+    runs[lo][1] = runs[lo][1].saturating_add(runs[hi][1]); // both negative
+    runs[hi][1] = lo as i32 + 1;
+}
+
+/// [`label_components_in`] without a label image: the same components,
+/// numbered the same way (1, 2, … in raster order of their first pixel,
+/// `keep(area)` deciding which are numbered), as a table of runs.
+///
+/// On return `runs[row_start[y] as usize..row_start[y + 1] as usize]` are
+/// the runs of row `y` left to right, each `[packed, label]`: `packed`
+/// holds the columns ([`run_span`]), `label` is 0 for a component `keep`
+/// refused. Returns (kept components, runs used). Like
+/// [`label_components_in`], the mask must be zero outside `cols(y)`.
+///
+/// Why (issue 8): a region's first labelling (eq. (4)) needs each
+/// component's pixels only run by run — for its statistics and for the
+/// accepted mask — so writing and re-reading a 4-byte label per pixel
+/// (three passes over the ellipse) is replaced by one pass over the mask
+/// bytes and a union-find over runs, 8 bytes per run.
+///
+/// Errors: `row_start` shorter than `height + 1`, `runs` shorter than the
+/// mask's runs ([`run_capacity`] of the columns is always enough), or a
+/// mask wider than 65 535 columns.
+pub fn label_runs_in(
+    mask: crate::image::ImageView<'_>,
+    cols: impl Fn(usize) -> core::ops::Range<usize>,
+    runs: &mut [[i32; 2]],
+    row_start: &mut [u32],
+    mut keep: impl FnMut(u32) -> bool,
+) -> Result<(u32, usize), LabelError> {
+    let (w, h) = (mask.width(), mask.height());
+    if w > 0xffff || row_start.len() <= h || runs.len() >= u32::MAX as usize {
+        return Err(LabelError::BufferTooSmall);
+    }
+    // pass 1: runs, unions with the 8-neighbouring runs of the previous row
+    let mut nr = 0usize;
+    let mut prev = 0..0;
+    for (y, start) in row_start.iter_mut().enumerate().take(h) {
+        *start = nr as u32;
+        let row = mask.row(y);
+        let r = cols(y);
+        let end = r.end.min(w);
+        let mut x = r.start.min(end);
+        let mut k = prev.start;
+        while x < end {
+            let x0 = next_where(row, x, end, true);
+            if x0 >= end {
+                break;
+            }
+            let x1 = next_where(row, x0, end, false);
+            let slot = runs.get_mut(nr).ok_or(LabelError::BufferTooSmall)?;
+            *slot = [(x0 | (x1 << 16)) as i32, -((x1 - x0) as i32)];
+            // previous runs [px0, px1) touch [x0, x1) 8-connectedly iff
+            // px1 ≥ x0 and px0 ≤ x1; both rows are sorted, so runs that
+            // end left of this one end left of every later one too
+            while k < prev.end && run_span(runs[k][0]).end < x0 {
+                k += 1;
+            }
+            let mut kk = k;
+            while kk < prev.end && run_span(runs[kk][0]).start <= x1 {
+                union_runs(runs, nr, kk);
+                kk += 1;
+            }
+            nr += 1;
+            x = x1;
+        }
+        prev = *start as usize..nr;
+    }
+    row_start[h] = nr as u32;
+    // pass 2: raster order; a parent is an earlier run, already final
+    let mut next = 0u32;
+    for i in 0..nr {
+        let v = runs[i][1];
+        let l = if v < 0 {
+            if keep(v.unsigned_abs()) {
+                next += 1;
+                next as i32
+            } else {
+                0
+            }
+        } else {
+            (v as usize)
+                .checked_sub(1)
+                .and_then(|p| runs.get(p))
+                .map_or(0, |r| r[1])
+        };
+        runs[i][1] = l;
+    }
+    Ok((next, nr))
+}
+
 /// `dst.fill(v)` as a loop of vector stores, never a `memset` call: the
 /// fills here are many and short (a background stretch of one label row),
 /// where the call costs more than the stores, and glibc's `rep stosb` path
@@ -1029,6 +1163,62 @@ mod tests {
                     }
                 }
             }
+        }
+
+        /// The run table labels every pixel as [`label_components_in`]
+        /// does (same count, same numbers, keep asked the same areas), its
+        /// runs are the mask's maximal runs row by row, [`run_capacity`] of
+        /// the columns is enough, and one run less of room is an error.
+        #[test]
+        fn label_runs_in_equals_label_components_in(w in 1usize..90, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
+            let mut mask = random_mask(w, h, seed, density);
+            let mut s = seed ^ 0x5851_f42d_4c95_7f2d;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s as usize };
+            let spans: Vec<core::ops::Range<usize>> = (0..h).map(|_| {
+                let a = next() % (w + 1);
+                let b = next() % (w + 6);
+                if next() % 3 == 0 { 0..w } else { a.min(b)..a.max(b) }
+            }).collect();
+            for (y, r) in spans.iter().enumerate() {
+                for x in 0..w {
+                    if !r.contains(&x) { mask[y * w + x] = 0; }
+                }
+            }
+            let view = ImageView::packed(&mask, w, h).unwrap();
+            let mut want = vec![0i32; w * h];
+            let mut asked_w = Vec::new();
+            let kw = label_components_in(view, &mut want, |y| spans[y].clone(), |a| { asked_w.push(a); a >= min_area }).unwrap();
+            let cols: usize = spans.iter().map(|r| r.end.min(w) - r.start.min(r.end.min(w))).sum();
+            let cap = run_capacity(cols, h);
+            let mut runs = vec![[0i32; 2]; cap];
+            let mut starts = vec![0u32; h + 1];
+            let mut asked_r = Vec::new();
+            let (kr, nr) = label_runs_in(view, |y| spans[y].clone(), &mut runs, &mut starts, |a| { asked_r.push(a); a >= min_area }).unwrap();
+            prop_assert_eq!(kr, kw);
+            prop_assert_eq!(asked_r, asked_w);
+            prop_assert_eq!(starts[h] as usize, nr);
+            let mut got = vec![0i32; w * h];
+            for y in 0..h {
+                let mut last_end = None;
+                for run in &runs[starts[y] as usize..starts[y + 1] as usize] {
+                    let r = run_span(run[0]);
+                    prop_assert!(r.start < r.end && r.end <= w);
+                    // maximal: not adjacent to the previous run of the row
+                    if let Some(e) = last_end { prop_assert!(r.start > e); }
+                    last_end = Some(r.end);
+                    for x in r { got[y * w + x] = run[1]; }
+                }
+            }
+            for (y, r) in spans.iter().enumerate() {
+                for x in 0..w {
+                    let i = y * w + x;
+                    if r.contains(&x) { prop_assert_eq!(got[i], want[i]); } else { prop_assert_eq!(got[i], 0); }
+                }
+            }
+            if nr > 0 {
+                prop_assert!(label_runs_in(view, |y| spans[y].clone(), &mut runs[..nr - 1], &mut starts, |_| true).is_err());
+            }
+            prop_assert!(label_runs_in(view, |y| spans[y].clone(), &mut runs, &mut starts[..h], |_| true).is_err());
         }
 
         #[test]

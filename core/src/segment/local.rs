@@ -35,8 +35,14 @@
 //!   dropped ([`elongated_enough`]) unless the frame border cuts them
 //!   ([`cut_by_border`]).
 //!
+//! The first labelling (eq. (4)) is a run table in the label buffer
+//! ([`crate::label::label_runs_in`]: same components, same numbers as
+//! the label image, which only the final components need).
+//!
 //! Memory bound: the ROI buffers of the workspace (8 bytes per ROI pixel),
-//! one span per ROI row, [`super::MAX_ROI_COMPONENTS`] statistics records;
+//! one span and one run-table row start per ROI row (the label buffer has
+//! one extra word per frame row, so the run table always fits),
+//! [`super::MAX_ROI_COMPONENTS`] statistics records;
 //! on the stack two 256-bin histograms and a 256-entry table.
 
 use super::workspace::{RoiBufs, STAT_WORDS};
@@ -47,7 +53,7 @@ use crate::hist::{
     ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
-use crate::label::{label_components_in, Moments};
+use crate::label::{label_components_in, label_runs_in, run_span, Moments};
 use crate::morph::{close_disk_in_place, median3_binary_in, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
@@ -338,10 +344,11 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     }
     box_mean_roi(frame, roi, params.local_smooth, colsum, d)
         .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    let labels = bufs
-        .labels
-        .get_mut(..n)
-        .ok_or(SegmentError::WorkspaceTooSmall)?;
+    // (all of it: the run table of eq. (4) may need more words than n)
+    let labels = &mut *bufs.labels;
+    if labels.len() < n {
+        return Err(SegmentError::WorkspaceTooSmall);
+    }
     // the frame minus its smooth background (beyond the paper), for
     // regions whose coarse object the background's opening removed
     if let Some(g) = bg {
@@ -450,14 +457,27 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     // --- area and variance rejection, eq. (4)–(6): accepted mask into `a` ---
     let (amin, amax) = (params.area_min, params.area_max);
     let mut rej_area = 0u32;
-    // (B is 0 outside the ellipse, and only its spans of the labels are read)
-    let n1 = label_components_in(view(b, rw, rh)?, labels, cols, |ar| {
+    // (B is 0 outside the ellipse; labelled as a run table in the label
+    // buffer, crate::label::label_runs_in: the statistics and the accepted
+    // mask below need the components only run by run)
+    let run_words = (labels.len() / 2) * 2;
+    let runs: &mut [[i32; 2]] = bytemuck::cast_slice_mut(&mut labels[..run_words]);
+    let (n1, _) = label_runs_in(view(b, rw, rh)?, cols, runs, bufs.row_runs, |ar| {
         let ok = ar >= amin && ar <= amax;
         rej_area += !ok as u32;
         ok
     })
     .map_err(|_| SegmentError::WorkspaceTooSmall)?;
     stats.rejected_area += rej_area;
+    let row_runs = &*bufs.row_runs;
+    let runs = &*runs;
+    let runs_of = |j: usize| {
+        let (s, e) = (row_runs.get(j), row_runs.get(j + 1));
+        match (s, e) {
+            (Some(&s), Some(&e)) => runs.get(s as usize..e as usize).unwrap_or(&[]),
+            _ => &[],
+        }
+    };
 
     let cap = recs.len().min(super::MAX_ROI_COMPONENTS);
     let n1s = (n1 as usize).min(cap);
@@ -465,19 +485,20 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     for rec in recs.iter_mut().take(n1s) {
         clear_rec(rec);
     }
-    // (labels are valid inside the spans only: B is 0 outside them)
-    for (j, sp) in spans.iter().enumerate() {
-        let r = span(sp);
-        let row = pv.row(j).get(r.clone()).unwrap_or(&[]);
-        let srow = sv.row(j).get(r.clone()).unwrap_or(&[]);
-        let lrow = row_of(labels, j, rw).get(r).unwrap_or(&[]);
-        for (k, i0, i1) in label_runs(lrow, n1s) {
-            let Some(rec) = recs.get_mut(k) else {
+    for j in 0..rh {
+        let (row, srow) = (pv.row(j), sv.row(j));
+        for run in runs_of(j) {
+            let l = run[1];
+            if l <= 0 || l as usize > n1s {
+                continue;
+            }
+            let Some(rec) = recs.get_mut(l as usize - 1) else {
                 continue;
             };
-            let (s1, s2) = sum_sumsq(row.get(i0..i1).unwrap_or(&[]));
-            let (q1, _) = sum_sumsq(srow.get(i0..i1).unwrap_or(&[]));
-            rec[0] += (i1 - i0) as u64;
+            let r = run_span(run[0]);
+            let (s1, s2) = sum_sumsq(row.get(r.clone()).unwrap_or(&[]));
+            let (q1, _) = sum_sumsq(srow.get(r.clone()).unwrap_or(&[]));
+            rec[0] += r.len() as u64;
             rec[10] += s1;
             rec[11] += s2;
             rec[12] += q1;
@@ -518,35 +539,32 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     if !acc.iter().any(|&v| v != 0) {
         return Ok(());
     }
-    // (labels are valid inside the spans only); the accepted pixels' bounding
-    // box [x0, x1) × [y0, y1) in ROI coordinates
+    // the accepted pixels' bounding box [x0, x1) × [y0, y1), ROI coordinates
     let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
-    for (j, sp) in spans.iter().enumerate() {
-        let r = span(sp);
+    for j in 0..rh {
         let Some(ra) = a.get_mut(j * rw..(j + 1) * rw) else {
             break;
         };
         ra.fill(0);
-        let lrow = row_of(labels, j, rw).get(r.clone()).unwrap_or(&[]);
-        let x_off = r.start;
-        let ra = ra.get_mut(r).unwrap_or(&mut []);
-        let mut i = 0;
-        while let Some((l, i0, i1)) = next_run(lrow, i) {
-            i = i1;
-            let v = acc.get(l.max(0) as usize).copied().unwrap_or(0);
-            if let Some(part) = ra.get_mut(i0..i1) {
-                part.fill(v);
+        for run in runs_of(j) {
+            let v = acc.get(run[1].max(0) as usize).copied().unwrap_or(0);
+            if v == 0 {
+                continue;
             }
-            if v != 0 {
-                bbox = [
-                    bbox[0].min(x_off + i0),
-                    bbox[1].min(j),
-                    bbox[2].max(x_off + i1),
-                    bbox[3].max(j + 1),
-                ];
+            let r = run_span(run[0]);
+            bbox = [
+                bbox[0].min(r.start),
+                bbox[1].min(j),
+                bbox[2].max(r.end),
+                bbox[3].max(j + 1),
+            ];
+            if let Some(part) = ra.get_mut(r) {
+                part.fill(v);
             }
         }
     }
+
+    let labels = labels.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
 
     // --- post-processing, Section III.D: closing then opening ---
     let disk = Disk::opencv_ellipse(params.disk_size);

@@ -40,7 +40,9 @@
 //! **Memory.** All scratch lives in the caller's workspace of
 //! [`workspace_size`]`(width, height, max_roi_pixels)` bytes: two frame
 //! buffers (mesh-free frame, gradient), `O(width)` labelling tables, and
-//! 8 bytes per pixel of the largest region of interest. A region whose
+//! 8 bytes per pixel of the largest region of interest (plus 8 bytes per
+//! frame row for the run table of eq. (4)'s first labelling,
+//! [`crate::label::label_runs_in`]). A region whose
 //! bounding box exceeds the ROI capacity is shrunk about its centre until it
 //! fits ([`SegmentStats::regions_shrunk`]). Stack use per call is a few KiB
 //! (five 256-entry `u32` histograms and a lookup table in the deepest frame;
@@ -48,12 +50,12 @@
 //! 4 KiB, and works in the region's own buffers: workspace size unchanged).
 //!
 //! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
-//! `workspace_size(2048, 2048, 1 << 20)` = 18 098 496 bytes (17.3 MiB):
+//! `workspace_size(2048, 2048, 1 << 20)` = 18 114 900 bytes (17.3 MiB):
 //! 8 MiB for the two frame buffers (the second one, the full-resolution
 //! gradient, also holds the 4 × 4-downsampled frame, its gradient, labels
 //! and masks: 2.5 MiB, so the reduced-resolution pass costs no memory), 1 MiB for the morphology ring (sized
 //! for disks up to 31 × 31), about 0.3 MiB of labelling tables and region
-//! records, and 8 MiB of ROI buffers (measured by the
+//! records, 16 KiB of run-table rows, and 8 MiB of ROI buffers (measured by the
 //! `full_size_frame_with_recommended_capacities` test). Recommended output
 //! capacity: `Objects<64, 16384>` (106 008 bytes; one run per mask row, so
 //! 16384 runs hold 64 fish of 256 rows on average).

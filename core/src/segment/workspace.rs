@@ -60,8 +60,9 @@ pub const fn fixed_size(width: usize, height: usize) -> usize {
         + 2 * r * RUN_WORDS * 4             // run rows
         + MAX_REGIONS * REGION_WORDS * 4
         + height * 8                        // ellipse spans
+        + (height + 1) * 4 + height * 4     // run table: row starts, extra words
         + MAX_ROI_COMPONENTS * STAT_WORDS * 8
-        + 12 * SLACK
+        + 14 * SLACK
 }
 
 /// Workspace bytes [`super::segment_frame`] needs for `width × height`
@@ -91,7 +92,12 @@ pub(crate) struct RoiBufs<'a> {
     pub b: &'a mut [u8],
     pub c: &'a mut [u8],
     pub d: &'a mut [u8],
+    /// `max_pixels + height` words: an ROI's label image, or (eq. (4)'s
+    /// first labelling) its run table, which may need up to `(n + rows) / 2`
+    /// runs of 2 words ([`crate::label::run_capacity`]).
     pub labels: &'a mut [i32],
+    /// Start of each ROI row's runs in the run table (`height + 1`).
+    pub row_runs: &'a mut [u32],
     pub max_pixels: usize,
 }
 
@@ -163,8 +169,9 @@ impl<'a> Ws<'a> {
         let (regions, ws) = carve::<[f32; REGION_WORDS]>(ws, MAX_REGIONS)?;
         let (spans, ws) = carve::<[i32; 2]>(ws, height)?;
         let (stats, ws) = carve::<[u64; STAT_WORDS]>(ws, MAX_ROI_COMPONENTS)?;
-        let m = ws.len().saturating_sub(2 * SLACK) / BYTES_PER_ROI_PIXEL;
-        let (labels, ws) = carve::<i32>(ws, m)?;
+        let (row_runs, ws) = carve::<u32>(ws, height + 1)?;
+        let m = ws.len().saturating_sub(2 * SLACK + height * 4 + SLACK) / BYTES_PER_ROI_PIXEL;
+        let (labels, ws) = carve::<i32>(ws, m + height)?;
         let (a, ws) = carve::<u8>(ws, m)?;
         let (b, ws) = carve::<u8>(ws, m)?;
         let (c, ws) = carve::<u8>(ws, m)?;
@@ -186,6 +193,7 @@ impl<'a> Ws<'a> {
                 c,
                 d,
                 labels,
+                row_runs,
                 max_pixels: m,
             },
         })
