@@ -46,7 +46,9 @@
 //! on the stack two 256-bin histograms and a 256-entry table.
 
 use super::workspace::{RoiBufs, STAT_WORDS};
-use super::{emit, Candidate, MaskRef, Region, RegionTrace, SegmentError, SegmentStats};
+use super::{
+    emit, Candidate, Components, MaskRef, Region, RegionTrace, SegmentError, SegmentStats,
+};
 use crate::background::{BgGrid, BLOCK};
 use crate::hist::{
     add_masked_pair_256, add_row_256, bin_of, fold_bins_range, median_mad, percentile_256,
@@ -234,54 +236,6 @@ fn close_open_window(
         dst.copy_from_slice(wrow);
     }
     Ok([x0, y0, x1, y1])
-}
-
-/// Row `j` of a `rw`-wide label buffer (empty past its end: never panics).
-fn row_of(labels: &[i32], j: usize, rw: usize) -> &[i32] {
-    labels.get(j * rw..(j + 1) * rw).unwrap_or(&[])
-}
-
-/// The runs of labels `1..=n` in a label row: `(label − 1, start, end)`
-/// ([`next_run`], other labels skipped).
-fn label_runs(lrow: &[i32], n: usize) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
-    let mut i = 0;
-    core::iter::from_fn(move || loop {
-        let (l, i0, i1) = next_run(lrow, i)?;
-        i = i1;
-        if l > 0 && l as usize <= n {
-            return Some((l as usize - 1, i0, i1));
-        }
-    })
-}
-
-/// The next run of equal non-zero labels in `l` at or after `i`: `(label,
-/// start, end)`. Zeros (background) are skipped and runs extended 16
-/// labels per test (one OR over the block, which vectorises).
-#[inline]
-fn next_run(l: &[i32], i: usize) -> Option<(i32, usize, usize)> {
-    let rest = l.get(i..)?;
-    let mut k = 0;
-    for blk in rest.chunks_exact(16) {
-        if blk.iter().fold(0, |acc, &x| acc | x) != 0 {
-            break;
-        }
-        k += 16;
-    }
-    let tail = rest.get(k..)?;
-    let z = tail.iter().position(|&x| x != 0)?;
-    let run = tail.get(z..)?;
-    let v = *run.first()?;
-    let mut m = 0;
-    for blk in run.chunks_exact(16) {
-        if blk.iter().fold(0, |acc, &x| acc | (x ^ v)) != 0 {
-            break;
-        }
-        m += 16;
-    }
-    let more = run.get(m..).unwrap_or(&[]);
-    m += more.iter().position(|&x| x != v).unwrap_or(more.len());
-    let start = i + k + z;
-    Some((v, start, start + m))
 }
 
 /// Clears `rec` to an empty statistics record.
@@ -564,15 +518,14 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         }
     }
 
-    let labels = labels.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
-
     // --- post-processing, Section III.D: closing then opening ---
     let disk = Disk::opencv_ellipse(params.disk_size);
     let win = close_open_window(a, (rw, rh), bbox, &disk, b, c, disk_scratch)?;
 
     // --- final components and their statistics ---
-    // (labelled on the window only, outside which the mask is 0; the split
-    // of merged objects reads whole label rows, so then the whole box)
+    // (labelled on the window only, outside which the mask is 0: as a run
+    // table, or — for the split of merged objects, which reads and rewrites
+    // whole label rows — as a label image of the whole box)
     let win = if params.split_merged {
         [0, 0, rw, rh]
     } else {
@@ -585,19 +538,30 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             0..0
         }
     };
-    let n2 = label_components_in(view(a, rw, rh)?, labels, wcols, |ar| {
-        ar >= amin && ar <= amax
-    })
-    .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    let n2 = if params.split_merged {
+    let keep = |ar: u32| ar >= amin && ar <= amax;
+    let (n2, comp) = if params.split_merged {
+        let labels = labels.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+        let n2 = label_components_in(view(a, rw, rh)?, labels, wcols, keep)
+            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
         let bufs = super::split::SplitBufs {
             lab8: a,
             level: b,
             part: c,
         };
-        super::split::split_merged(sv, roi, (fw, fh), labels, n2, t_low, params, bufs, stats)
+        let n2 =
+            super::split::split_merged(sv, roi, (fw, fh), labels, n2, t_low, params, bufs, stats);
+        (n2, Components::Labels { labels, rw })
     } else {
-        n2
+        let runs: &mut [[i32; 2]] = bytemuck::cast_slice_mut(&mut labels[..run_words]);
+        let (n2, _) = label_runs_in(view(a, rw, rh)?, wcols, runs, bufs.row_runs, keep)
+            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+        (
+            n2,
+            Components::Runs {
+                runs,
+                row_start: bufs.row_runs,
+            },
+        )
     };
     let n2s = (n2 as usize).min(cap);
     stats.label_overflow += n2 - n2s as u32;
@@ -606,12 +570,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     }
     for j in win[1]..win[3] {
         let row = pv.row(j);
-        let lrow = row_of(labels, j, rw).get(win[0]..win[2]).unwrap_or(&[]);
         let y = roi.y + j as u32;
-        for (k, i0, i1) in label_runs(lrow, n2s) {
-            let (i0, i1) = (i0 + win[0], i1 + win[0]);
-            let Some(rec) = recs.get_mut(k) else {
-                continue;
+        comp.for_row(j, |l, i0, i1| {
+            if l <= 0 || l as usize > n2s {
+                return;
+            }
+            let Some(rec) = recs.get_mut(l as usize - 1) else {
+                return;
             };
             let px = row.get(i0..i1).unwrap_or(&[]);
             let (s1, s2) = sum_sumsq(px);
@@ -623,7 +588,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             let mut m = Moments::from_words(&rec[..10]);
             m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
             m.to_words(&mut rec[..10]);
-        }
+        });
     }
     for k in 0..n2s {
         let Some(rec) = recs.get(k) else { break };
@@ -643,14 +608,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             hist,
         };
         let mask = MaskRef {
-            labels,
+            comp: &comp,
             roi,
-            valid: Roi::new(
-                roi.x + win[0] as u32,
-                roi.y + win[1] as u32,
-                (win[2] - win[0]) as u32,
-                (win[3] - win[1]) as u32,
-            ),
             label: k as i32 + 1,
         };
         emit(out, &cand, &mask, stats);
@@ -662,7 +621,6 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
 mod tests {
     use super::*;
     extern crate std;
-    use std::vec::Vec;
 
     proptest::proptest! {
         /// Closing then opening on the window around the mask's box equals
@@ -698,36 +656,6 @@ mod tests {
             let mut win = std::vec![0u8; w * h];
             close_open_window(&mut a, (w, h), bbox, &disk, &mut win, &mut tmp, &mut scratch).unwrap();
             proptest::prop_assert_eq!(a, whole);
-        }
-
-        /// [`next_run`] walks the same runs of equal non-zero labels as a
-        /// pixel-by-pixel scan.
-        #[test]
-        fn next_run_equals_scan(len in 0usize..300, seed in proptest::prelude::any::<u64>(), dens in 0u64..8) {
-            let mut s = seed | 1;
-            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
-            let mut l: Vec<i32> = Vec::new();
-            while l.len() < len {
-                let v = if next() % 8 < dens { (next() % 5) as i32 - 1 } else { 0 };
-                let k = (next() % 40) as usize;
-                l.extend(core::iter::repeat_n(v, k.min(len - l.len()).max(1)));
-            }
-            l.truncate(len);
-            let mut want = Vec::new();
-            let mut i = 0;
-            while i < l.len() {
-                if l[i] == 0 { i += 1; continue; }
-                let i0 = i;
-                while i < l.len() && l[i] == l[i0] { i += 1; }
-                want.push((l[i0], i0, i));
-            }
-            let mut got = Vec::new();
-            let mut i = 0;
-            while let Some(r) = next_run(&l, i) {
-                i = r.2;
-                got.push(r);
-            }
-            proptest::prop_assert_eq!(got, want);
         }
     }
 }

@@ -191,52 +191,77 @@ pub(crate) struct Candidate {
     pub hist: [u32; HIST_BINS],
 }
 
-/// Where a candidate's mask is: pixels of `labels` (ROI `roi`, packed with
-/// width `roi.w`) equal to `label`.
+/// The final components of a region, ROI coordinates: a run table
+/// ([`crate::label::label_runs_in`]) or, after the split of merged objects
+/// (which works on label rows), a packed label image `rw` wide.
+pub(crate) enum Components<'a> {
+    Runs {
+        runs: &'a [[i32; 2]],
+        row_start: &'a [u32],
+    },
+    Labels {
+        labels: &'a [i32],
+        rw: usize,
+    },
+}
+
+impl Components<'_> {
+    /// Calls `f(label, x0, x1)` for every maximal run `[x0, x1)` of one
+    /// non-zero label in ROI row `j`, left to right (none past the ROI).
+    pub(crate) fn for_row(&self, j: usize, mut f: impl FnMut(i32, usize, usize)) {
+        match self {
+            Components::Runs { runs, row_start } => {
+                let (Some(&s), Some(&e)) = (row_start.get(j), row_start.get(j + 1)) else {
+                    return;
+                };
+                for run in runs.get(s as usize..e as usize).unwrap_or(&[]) {
+                    let r = crate::label::run_span(run[0]);
+                    if run[1] != 0 {
+                        f(run[1], r.start, r.end);
+                    }
+                }
+            }
+            Components::Labels { labels, rw } => {
+                let row = labels.get(j * rw..(j + 1) * rw).unwrap_or(&[]);
+                let mut i = 0;
+                while i < row.len() {
+                    let v = row[i];
+                    let mut e = i + 1;
+                    if v == 0 {
+                        e = find_label(row, e, 0, false);
+                    } else {
+                        e = find_label(row, e, v, false);
+                        f(v, i, e);
+                    }
+                    i = e;
+                }
+            }
+        }
+    }
+}
+
+/// Where a candidate's mask is: the pixels of label `label` of `comp`
+/// (ROI `roi`).
 pub(crate) struct MaskRef<'a> {
-    pub labels: &'a [i32],
+    pub comp: &'a Components<'a>,
     pub roi: Roi,
-    /// The part of `roi` whose labels are valid (frame coordinates): the
-    /// mask is empty outside it.
-    pub valid: Roi,
     pub label: i32,
 }
 
 impl MaskRef<'_> {
-    /// The labels of row `y` over columns `[x0, x1)` clipped to the ROI's
-    /// valid part, and the column of the slice's first entry (empty
-    /// outside it).
-    fn row_span(&self, y: u32, x0: u32, x1: u32) -> (&[i32], u32) {
-        let v = self.valid.intersect(&self.roi);
-        if y < v.y || y >= v.bottom() {
-            return (&[], x0);
-        }
-        let a = x0.max(v.x);
-        let b = x1.min(v.right());
-        if b <= a {
-            return (&[], a);
-        }
-        let off = (y - self.roi.y) as usize * self.roi.w as usize;
-        let s = off + (a - self.roi.x) as usize;
-        let e = off + (b - self.roi.x) as usize;
-        (self.labels.get(s..e).unwrap_or(&[]), a)
-    }
-
-    /// Calls `f(x0, x1)` for every maximal run `[x0, x1)` of the mask in row
-    /// `y` within columns `[xa, xb)`, left to right.
+    /// Calls `f(x0, x1)` for every maximal run `[x0, x1)` (frame columns) of
+    /// the mask in frame row `y` within columns `[xa, xb)`, left to right.
     fn for_runs(&self, y: u32, xa: u32, xb: u32, mut f: impl FnMut(u32, u32)) {
-        let (row, base) = self.row_span(y, xa, xb);
-        let label = self.label;
-        let mut i = 0usize;
-        while i < row.len() {
-            i = find_label(row, i, label, true);
-            if i >= row.len() {
-                break;
-            }
-            let start = i;
-            i = find_label(row, i, label, false);
-            f(base + start as u32, base + i as u32);
+        if y < self.roi.y || y >= self.roi.bottom() {
+            return;
         }
+        let (rx, label) = (self.roi.x, self.label);
+        self.comp.for_row((y - self.roi.y) as usize, |l, x0, x1| {
+            let (a, b) = ((rx + x0 as u32).max(xa), (rx + x1 as u32).min(xb));
+            if l == label && a < b {
+                f(a, b);
+            }
+        });
     }
 }
 
@@ -349,12 +374,7 @@ fn overlap(pool: &[Run], obj: &Object, mask: &MaskRef<'_>) -> u32 {
     let e = s.saturating_add(obj.runs.len as usize);
     let mut n = 0u32;
     for r in pool.get(s..e).unwrap_or(&[]) {
-        let y = r.y as u32;
-        if y < mask.roi.y || y >= mask.roi.bottom() {
-            continue;
-        }
-        let (row, _) = mask.row_span(y, r.x0 as u32, r.x1 as u32);
-        n += row.iter().filter(|&&l| l == mask.label).count() as u32;
+        mask.for_runs(r.y as u32, r.x0 as u32, r.x1 as u32, |a, b| n += b - a);
     }
     n
 }
