@@ -499,14 +499,6 @@ pub(crate) fn fill_stores<T: Copy>(dst: &mut [T], v: T) {
     }
 }
 
-/// The next run of nonzero bytes in `row[..w]` at or after `x`, or `None`
-/// when the rest of the row is zero ([`next_where`] twice).
-pub(crate) fn next_run(row: &[u8], x: usize, w: usize) -> Option<core::ops::Range<usize>> {
-    let x0 = next_where(row, x, w, true);
-    let x1 = next_where(row, x0, w, false);
-    (x0 < x1).then_some(x0..x1)
-}
-
 /// First column `≥ x` (below `w`) whose pixel is nonzero (`nonzero` true)
 /// or zero (`nonzero` false); `w` when there is none. Uniform stretches are
 /// skipped 16 pixels per step.

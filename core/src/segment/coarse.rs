@@ -55,7 +55,7 @@ use super::{Region, SegmentError, SegmentStats};
 use crate::background::BgGrid;
 use crate::hist::add_row_256;
 use crate::image::ImageView;
-use crate::label::{label_components, next_run, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use crate::label::{label_runs_in, run_span, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
 use crate::lowres::{box_mean16, gradient_disk_u16, low_size, median_mad_u16};
 use crate::morph::{gradient_disk, remove_mesh, Disk};
 use crate::params::Params;
@@ -300,7 +300,7 @@ fn coarse_regions_low(
     let f = params.coarse_scale as usize;
     let (lw, lh) = low_size(fv.width(), fv.height(), f);
     let nl = lw * lh;
-    let lb = LowBufs::carve(scratch, nl).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let lb = LowBufs::carve(scratch, nl, lh).ok_or(SegmentError::WorkspaceTooSmall)?;
     // 2. downsample and gradient
     box_mean16(fv, f, lb.img).map_err(|_| SegmentError::WorkspaceTooSmall)?;
     let disk = Disk::opencv_ellipse(COARSE_LOW_DISK);
@@ -319,52 +319,53 @@ fn coarse_regions_low(
     for (m, &g) in mask.iter_mut().zip(grad) {
         *m = if g > t_low { 255 } else { 0 };
     }
-    // keep the low components that hold a seed (g > t_high)
+    // keep the low components that hold a seed (g > t_high): labelled as a
+    // run table (crate::label::label_runs_in), a component is seeded when
+    // one of its runs holds a seed, and only its runs are rewritten
     let min_low = ((params.area_min / 4).max(1) as usize).div_ceil(f * f) as u32;
-    label_components(
+    let lw1 = lw.max(1);
+    let run_words = (lb.labels.len() / 2) * 2;
+    let runs: &mut [[i32; 2]] = bytemuck::cast_slice_mut(&mut lb.labels[..run_words]);
+    let (n_low, _) = label_runs_in(
         ImageView::packed(mask, lw, lh).map_err(|_| SegmentError::WorkspaceTooSmall)?,
-        lb.labels,
+        |_| 0..lw,
+        runs,
+        lb.row_runs,
         |a| a >= min_low,
     )
     .map_err(err)?;
     let seeded = lb
         .seeded
-        .get_mut(..nl)
+        .get_mut(..n_low as usize)
         .ok_or(SegmentError::WorkspaceTooSmall)?;
     crate::label::fill_stores(seeded, 0);
-    let labels = lb.labels.get(..nl).ok_or(SegmentError::WorkspaceTooSmall)?;
-    // both loops only look at the mask's runs (a seed has g > t_high >
-    // t_low), background skipped 16 pixels at a time
-    let lw1 = lw.max(1);
-    for (mrow, (lrow, grow)) in mask
-        .chunks_exact(lw1)
-        .zip(labels.chunks_exact(lw1).zip(grad.chunks_exact(lw1)))
-    {
-        let mut x = 0;
-        while let Some(run) = next_run(mrow, x, lw1) {
-            x = run.end;
-            let (Some(lr), Some(gr)) = (lrow.get(run.clone()), grow.get(run)) else {
-                break;
-            };
-            for (&l, &g) in lr.iter().zip(gr) {
-                if l > 0 && g > t_high {
-                    if let Some(s) = seeded.get_mut(l as usize - 1) {
-                        *s = 1;
-                    }
+    let row_runs = &*lb.row_runs;
+    let runs_of = |y: usize| match (row_runs.get(y), row_runs.get(y + 1)) {
+        (Some(&s), Some(&e)) => runs.get(s as usize..e as usize).unwrap_or(&[]),
+        _ => &[],
+    };
+    for (y, grow) in grad.chunks_exact(lw1).enumerate() {
+        for run in runs_of(y) {
+            let l = run[1];
+            if l > 0
+                && grow
+                    .get(run_span(run[0]))
+                    .is_some_and(|g| g.iter().any(|&g| g > t_high))
+            {
+                if let Some(s) = seeded.get_mut(l as usize - 1) {
+                    *s = 1;
                 }
             }
         }
     }
-    for (mrow, lrow) in mask.chunks_exact_mut(lw1).zip(labels.chunks_exact(lw1)) {
-        let mut x = 0;
-        while let Some(run) = next_run(mrow, x, lw1) {
-            x = run.end;
-            let (Some(lr), Some(mr)) = (lrow.get(run.clone()), mrow.get_mut(run)) else {
-                break;
-            };
-            for (m, &l) in mr.iter_mut().zip(lr) {
-                let keep = l > 0 && seeded.get(l as usize - 1).is_some_and(|&s| s != 0);
-                *m = if keep { 255 } else { 0 };
+    for (y, mrow) in mask.chunks_exact_mut(lw1).enumerate() {
+        for run in runs_of(y) {
+            let l = run[1];
+            let keep = l > 0 && seeded.get(l as usize - 1).is_some_and(|&s| s != 0);
+            if !keep {
+                if let Some(m) = mrow.get_mut(run_span(run[0])) {
+                    m.fill(0);
+                }
             }
         }
     }
@@ -416,7 +417,7 @@ pub(crate) fn background_grid<'a>(
     let (bw, bh) = crate::background::grid_size(w, h);
     let nb = bw * bh;
     let (lw, lh) = low_size(w, h, super::workspace::MIN_COARSE_SCALE);
-    let lb = LowBufs::carve(scratch, lw * lh).ok_or(SegmentError::WorkspaceTooSmall)?;
+    let lb = LowBufs::carve(scratch, lw * lh, lh).ok_or(SegmentError::WorkspaceTooSmall)?;
     // every reduced-resolution buffer has `lw · lh ≥ bw · bh` entries (a
     // 16-pixel cell covers whole 4-pixel cells), so the grid fits the
     // gradient's place and its two scratch grids the labels' (i32 = 2 × u16)

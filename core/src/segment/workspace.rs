@@ -33,11 +33,13 @@ pub(crate) const LOW_HIST_BINS: usize = 1024;
 /// Bytes of the reduced-resolution buffers of the coarse pass for a
 /// `width × height` frame: per low-resolution pixel the downsampled frame
 /// and its gradient (`u16` each), a label (`i32`), a mask and a seed flag
-/// (`u8` each), plus two histograms. They live in the gradient buffer,
-/// which the reduced-resolution pass does not otherwise need.
+/// (`u8` each), plus two histograms and 8 bytes per low-resolution row
+/// (the run table's row starts and extra words). They live in the
+/// gradient buffer, which the reduced-resolution pass does not otherwise
+/// need.
 pub const fn lowres_size(width: usize, height: usize) -> usize {
     let (lw, lh) = crate::lowres::low_size(width, height, MIN_COARSE_SCALE);
-    lw * lh * 10 + 2 * LOW_HIST_BINS * 4 + 6 * SLACK
+    lw * lh * 10 + 2 * LOW_HIST_BINS * 4 + lh * 8 + 4 + 7 * SLACK
 }
 
 const fn max(a: usize, b: usize) -> usize {
@@ -118,29 +120,35 @@ fn carve<T: bytemuck::Pod>(ws: &mut [u8], n: usize) -> Option<(&mut [T], &mut [u
 pub(crate) struct LowBufs<'a> {
     pub img: &'a mut [u16],
     pub grad: &'a mut [u16],
+    /// `n + rows` words: the hysteresis mask's run table
+    /// ([`crate::label::label_runs_in`]).
     pub labels: &'a mut [i32],
     pub mask: &'a mut [u8],
     pub seeded: &'a mut [u8],
+    /// Start of each row's runs in the run table (`rows + 1`).
+    pub row_runs: &'a mut [u32],
     pub hist: &'a mut [u32],
     pub dev: &'a mut [u32],
 }
 
 impl<'a> LowBufs<'a> {
-    /// Carves `buf` for `n` low-resolution pixels.
-    pub fn carve(buf: &'a mut [u8], n: usize) -> Option<LowBufs<'a>> {
+    /// Carves `buf` for `n` low-resolution pixels in `rows` rows.
+    pub fn carve(buf: &'a mut [u8], n: usize, rows: usize) -> Option<LowBufs<'a>> {
         let (img, buf) = carve::<u16>(buf, n)?;
         let (grad, buf) = carve::<u16>(buf, n)?;
-        let (labels, buf) = carve::<i32>(buf, n)?;
+        let (labels, buf) = carve::<i32>(buf, n + rows)?;
         let (hist, buf) = carve::<u32>(buf, LOW_HIST_BINS)?;
         let (dev, buf) = carve::<u32>(buf, LOW_HIST_BINS)?;
         let (mask, buf) = carve::<u8>(buf, n)?;
-        let (seeded, _) = carve::<u8>(buf, n)?;
+        let (seeded, buf) = carve::<u8>(buf, n)?;
+        let (row_runs, _) = carve::<u32>(buf, rows + 1)?;
         Some(LowBufs {
             img,
             grad,
             labels,
             mask,
             seeded,
+            row_runs,
             hist,
             dev,
         })
