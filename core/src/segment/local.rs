@@ -582,8 +582,20 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             let (s1, s2) = sum_sumsq(px);
             rec[10] += s1;
             rec[11] += s2;
-            for &p in px {
-                rec[12 + bin_of(p, HIST_BINS)] += 1;
+            // (two u32 sub-histograms in turn: a run of equal levels does
+            // not chain every increment on one counter's store)
+            let mut hs = [[0u32; HIST_BINS]; 2];
+            let pairs = px.chunks_exact(2);
+            let rest = pairs.remainder();
+            for q in pairs {
+                hs[0][bin_of(q[0], HIST_BINS)] += 1;
+                hs[1][bin_of(q[1], HIST_BINS)] += 1;
+            }
+            for &p in rest {
+                hs[0][bin_of(p, HIST_BINS)] += 1;
+            }
+            for ((r, &a), &b) in rec[12..12 + HIST_BINS].iter_mut().zip(&hs[0]).zip(&hs[1]) {
+                *r += (a + b) as u64;
             }
             let mut m = Moments::from_words(&rec[..10]);
             m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
