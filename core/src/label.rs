@@ -232,6 +232,22 @@ fn union(labels: &mut [i32], a: usize, b: usize) {
     labels[hi] = lo as i32 + 1;
 }
 
+/// The numbering rule of both labellers' second pass for a union-find
+/// entry `v`: a root (`v < 0`, a component of `−v` pixels) gets the next
+/// number when `keep` accepts its area, else 0; `None` for any other entry
+/// (its label is its parent's, already final).
+#[inline]
+fn root_label(v: i32, next: &mut u32, keep: &mut impl FnMut(u32) -> bool) -> Option<i32> {
+    (v < 0).then(|| {
+        if keep(v.unsigned_abs()) {
+            *next += 1;
+            *next as i32
+        } else {
+            0
+        }
+    })
+}
+
 /// Labels the 8-connected components of the nonzero pixels of `mask` into
 /// `labels` (packed, `width × height`): 0 is background, components that
 /// `keep(area)` accepts are numbered 1, 2, … in raster order of their first
@@ -332,16 +348,8 @@ pub fn label_components_in(
             let x1 = next_where(row, x, end, false);
             let i = y * w + x;
             let v = labels[i];
-            let l = if v < 0 {
-                if keep(v.unsigned_abs()) {
-                    next += 1;
-                    next as i32
-                } else {
-                    0
-                }
-            } else {
-                labels.get((v - 1) as usize).copied().unwrap_or(0)
-            };
+            let l = root_label(v, &mut next, &mut keep)
+                .unwrap_or_else(|| labels.get((v - 1) as usize).copied().unwrap_or(0));
             if let Some(run) = labels.get_mut(i..y * w + x1) {
                 run.fill(l);
             }
@@ -467,19 +475,12 @@ pub fn label_runs_in(
     let mut next = 0u32;
     for i in 0..nr {
         let v = runs[i][1];
-        let l = if v < 0 {
-            if keep(v.unsigned_abs()) {
-                next += 1;
-                next as i32
-            } else {
-                0
-            }
-        } else {
+        let l = root_label(v, &mut next, &mut keep).unwrap_or_else(|| {
             (v as usize)
                 .checked_sub(1)
                 .and_then(|p| runs.get(p))
                 .map_or(0, |r| r[1])
-        };
+        });
         runs[i][1] = l;
     }
     Ok((next, nr))
@@ -1085,6 +1086,46 @@ mod tests {
         assert!(l2.abs() < 1e-4);
     }
 
+    /// A random mask zeroed outside random per-row column spans (some
+    /// reaching past the width; with `full`, a third of the rows whole),
+    /// and the spans.
+    fn masked_to_spans(
+        w: usize,
+        h: usize,
+        seed: u64,
+        density: u64,
+        span_seed: u64,
+        full: bool,
+    ) -> (Vec<u8>, Vec<core::ops::Range<usize>>) {
+        let mut mask = random_mask(w, h, seed, density);
+        let mut s = span_seed;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s as usize
+        };
+        let spans: Vec<core::ops::Range<usize>> = (0..h)
+            .map(|_| {
+                let a = next() % (w + 1);
+                let b = next() % (w + 6); // may reach past the width
+                if full && next() % 3 == 0 {
+                    0..w
+                } else {
+                    a.min(b)..a.max(b)
+                }
+            })
+            .collect();
+        for (y, r) in spans.iter().enumerate() {
+            for x in 0..w {
+                if !r.contains(&x) {
+                    mask[y * w + x] = 0;
+                }
+            }
+        }
+        (mask, spans)
+    }
+
     proptest! {
         // Miri interprets every step: a handful of cases checks the unsafe code paths in dependencies.
         #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
@@ -1126,19 +1167,7 @@ mod tests {
         /// whole labelling's labels and count, and writes nothing outside.
         #[test]
         fn label_components_in_spans_equals_whole(w in 1usize..90, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
-            let mut mask = random_mask(w, h, seed, density);
-            let mut s = seed ^ 0x9e37_79b9_7f4a_7c15;
-            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s as usize };
-            let spans: Vec<core::ops::Range<usize>> = (0..h).map(|_| {
-                let a = next() % (w + 1);
-                let b = next() % (w + 6); // may reach past the width
-                a.min(b)..a.max(b)
-            }).collect();
-            for (y, r) in spans.iter().enumerate() {
-                for x in 0..w {
-                    if !r.contains(&x) { mask[y * w + x] = 0; }
-                }
-            }
+            let (mask, spans) = masked_to_spans(w, h, seed, density, seed ^ 0x9e37_79b9_7f4a_7c15, false);
             let view = ImageView::packed(&mask, w, h).unwrap();
             let mut whole = vec![0i32; w * h];
             let kw = label_components(view, &mut whole, |a| a >= min_area).unwrap();
@@ -1163,19 +1192,7 @@ mod tests {
         /// the columns is enough, and one run less of room is an error.
         #[test]
         fn label_runs_in_equals_label_components_in(w in 1usize..90, h in 1usize..40, seed in any::<u64>(), density in 0u64..100, min_area in 0u32..6) {
-            let mut mask = random_mask(w, h, seed, density);
-            let mut s = seed ^ 0x5851_f42d_4c95_7f2d;
-            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s as usize };
-            let spans: Vec<core::ops::Range<usize>> = (0..h).map(|_| {
-                let a = next() % (w + 1);
-                let b = next() % (w + 6);
-                if next() % 3 == 0 { 0..w } else { a.min(b)..a.max(b) }
-            }).collect();
-            for (y, r) in spans.iter().enumerate() {
-                for x in 0..w {
-                    if !r.contains(&x) { mask[y * w + x] = 0; }
-                }
-            }
+            let (mask, spans) = masked_to_spans(w, h, seed, density, seed ^ 0x5851_f42d_4c95_7f2d, true);
             let view = ImageView::packed(&mask, w, h).unwrap();
             let mut want = vec![0i32; w * h];
             let mut asked_w = Vec::new();
