@@ -205,7 +205,7 @@ fn mean16(s: u64, count: u64) -> u16 {
 /// half-width and, after each distinct `t`, that extremum's horizontal
 /// window `[−t, t]` is merged into the output. For the 5 × 5 disk that is
 /// 11 maxima (and 11 minima) per pixel instead of 21, all slice-wise over
-/// chunks of [`CHUNK`] columns padded with the identity outside the image
+/// chunks of `CHUNK` columns padded with the identity outside the image
 /// (which is how outside pixels are ignored).
 pub fn gradient_disk_u16(
     src: &[u16],
