@@ -589,7 +589,7 @@ pub fn remove_mesh(
 }
 
 /// Scratch bytes of [`remove_mesh_fused`] for rows of `width` pixels and
-/// lines of `len` pixels: four rings of [`mesh_ring`] sheared rows, two
+/// lines of `len` pixels: four rings of `mesh_ring` sheared rows, two
 /// identity rows and two output rows of [`mesh_row_len`] bytes each, plus
 /// 15 bytes to align them to 16.
 pub const fn mesh_scratch_len(width: usize, len: usize) -> usize {
