@@ -590,7 +590,7 @@ pub fn remove_mesh(
 
 /// Scratch bytes of [`remove_mesh_fused`] for rows of `width` pixels and
 /// lines of `len` pixels: four rings of `mesh_ring` sheared rows, two
-/// identity rows and two output rows of [`mesh_row_len`] bytes each, plus
+/// identity rows and two output rows of `mesh_row_len` bytes each, plus
 /// 15 bytes to align them to 16.
 pub const fn mesh_scratch_len(width: usize, len: usize) -> usize {
     let half = mesh_half(len);
@@ -644,7 +644,7 @@ fn mesh_shear(y: usize, dir: Diagonal) -> usize {
 /// [`remove_mesh`] in one streaming pass over the frame (identical
 /// output): the four line operators (erosion and dilation along the main
 /// diagonal, then along the anti-diagonal) are chained through rings of
-/// [`mesh_ring`] rows each, so every intermediate row is made once, read
+/// `mesh_ring` rows each, so every intermediate row is made once, read
 /// `len + 1` times while it is in cache, and the frame is read once and
 /// written once. Rows outside the image are an identity row (255 before an
 /// erosion, 0 before a dilation) and ring rows carry padding holding the

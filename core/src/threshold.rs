@@ -5,7 +5,7 @@
 //! threshold `t` splits grey levels into a lower class `p ≤ t` and an upper
 //! class (the foreground) `p > t`. Memory bound: none; work: O(256).
 
-/// Otsu's threshold [21] of a 256-bin grey-level histogram: the level `t`
+/// Otsu's threshold (the paper's ref. 21) of a 256-bin grey-level histogram: the level `t`
 /// maximising the between-class variance of `{p ≤ t}` and `{p > t}`.
 ///
 /// This mirrors OpenCV's `getThreshVal_Otsu_8u` step for step (f64
