@@ -373,6 +373,16 @@ pub fn run_span(word: i32) -> core::ops::Range<usize> {
     (w & 0xffff) as usize..(w >> 16) as usize
 }
 
+/// The runs of row `y` of a [`label_runs_in`] table (empty for a row
+/// past the table).
+#[inline]
+pub fn runs_of_row<'r>(runs: &'r [[i32; 2]], row_start: &[u32], y: usize) -> &'r [[i32; 2]] {
+    match (row_start.get(y), row_start.get(y + 1)) {
+        (Some(&s), Some(&e)) => runs.get(s as usize..e as usize).unwrap_or(&[]),
+        _ => &[],
+    }
+}
+
 /// Root of run `i` in a run union-find (`v < 0` root of `−v` pixels,
 /// `v > 0` parent run `v − 1`, always an earlier run); path halving.
 #[inline]

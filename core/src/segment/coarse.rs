@@ -55,7 +55,9 @@ use super::{Region, SegmentError, SegmentStats};
 use crate::background::BgGrid;
 use crate::hist::add_row_256;
 use crate::image::ImageView;
-use crate::label::{label_runs_in, run_span, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS};
+use crate::label::{
+    label_runs_in, run_span, runs_of_row, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS,
+};
 use crate::lowres::{box_mean16, gradient_disk_u16, low_size, median_mad_u16};
 use crate::morph::{gradient_disk, remove_mesh, Disk};
 use crate::params::Params;
@@ -340,10 +342,8 @@ fn coarse_regions_low(
         .ok_or(SegmentError::WorkspaceTooSmall)?;
     crate::label::fill_stores(seeded, 0);
     let row_runs = &*lb.row_runs;
-    let runs_of = |y: usize| match (row_runs.get(y), row_runs.get(y + 1)) {
-        (Some(&s), Some(&e)) => runs.get(s as usize..e as usize).unwrap_or(&[]),
-        _ => &[],
-    };
+    let runs = &*runs;
+    let runs_of = |y: usize| runs_of_row(runs, row_runs, y);
     for (y, grow) in grad.chunks_exact(lw1).enumerate() {
         for run in runs_of(y) {
             let l = run[1];

@@ -35,9 +35,10 @@
 //!   dropped ([`elongated_enough`]) unless the frame border cuts them
 //!   ([`cut_by_border`]).
 //!
-//! The first labelling (eq. (4)) is a run table in the label buffer
-//! ([`crate::label::label_runs_in`]: same components, same numbers as
-//! the label image, which only the final components need).
+//! Both labellings (eq. (4)'s and the final one) are run tables in the
+//! label buffer ([`crate::label::label_runs_in`]: the same components and
+//! numbers as a label image; the final one is a label image only with
+//! `split_merged`, whose split works on label rows).
 //!
 //! Memory bound: the ROI buffers of the workspace (8 bytes per ROI pixel),
 //! one span and one run-table row start per ROI row (the label buffer has
@@ -55,7 +56,7 @@ use crate::hist::{
     ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
-use crate::label::{label_components_in, label_runs_in, run_span, Moments};
+use crate::label::{label_components_in, label_runs_in, run_span, runs_of_row, Moments};
 use crate::morph::{close_disk_in_place, median3_binary_in, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
@@ -425,13 +426,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     stats.rejected_area += rej_area;
     let row_runs = &*bufs.row_runs;
     let runs = &*runs;
-    let runs_of = |j: usize| {
-        let (s, e) = (row_runs.get(j), row_runs.get(j + 1));
-        match (s, e) {
-            (Some(&s), Some(&e)) => runs.get(s as usize..e as usize).unwrap_or(&[]),
-            _ => &[],
-        }
-    };
+    let runs_of = |j: usize| runs_of_row(runs, row_runs, j);
 
     let cap = recs.len().min(super::MAX_ROI_COMPONENTS);
     let n1s = (n1 as usize).min(cap);

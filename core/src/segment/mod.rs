@@ -211,10 +211,7 @@ impl Components<'_> {
     pub(crate) fn for_row(&self, j: usize, mut f: impl FnMut(i32, usize, usize)) {
         match self {
             Components::Runs { runs, row_start } => {
-                let (Some(&s), Some(&e)) = (row_start.get(j), row_start.get(j + 1)) else {
-                    return;
-                };
-                for run in runs.get(s as usize..e as usize).unwrap_or(&[]) {
+                for run in crate::label::runs_of_row(runs, row_start, j) {
                     let r = crate::label::run_span(run[0]);
                     if run[1] != 0 {
                         f(run[1], r.start, r.end);
