@@ -373,6 +373,14 @@ pub fn run_span(word: i32) -> core::ops::Range<usize> {
     (w & 0xffff) as usize..(w >> 16) as usize
 }
 
+/// A label buffer seen as a [`label_runs_in`] run table (two words a run;
+/// an odd last word is left out).
+#[inline]
+pub fn as_run_table(words: &mut [i32]) -> &mut [[i32; 2]] {
+    let n = words.len() / 2 * 2;
+    bytemuck::cast_slice_mut(&mut words[..n])
+}
+
 /// The runs of row `y` of a [`label_runs_in`] table (empty for a row
 /// past the table).
 #[inline]

@@ -56,7 +56,8 @@ use crate::background::BgGrid;
 use crate::hist::add_row_256;
 use crate::image::ImageView;
 use crate::label::{
-    label_runs_in, run_span, runs_of_row, Moments, StreamLabeler, RUN_WORDS, SLOT_WORDS,
+    as_run_table, label_runs_in, run_span, runs_of_row, Moments, StreamLabeler, RUN_WORDS,
+    SLOT_WORDS,
 };
 use crate::lowres::{box_mean16, gradient_disk_u16, low_size, median_mad_u16};
 use crate::morph::{gradient_disk, remove_mesh, Disk};
@@ -326,8 +327,7 @@ fn coarse_regions_low(
     // one of its runs holds a seed, and only its runs are rewritten
     let min_low = ((params.area_min / 4).max(1) as usize).div_ceil(f * f) as u32;
     let lw1 = lw.max(1);
-    let run_words = (lb.labels.len() / 2) * 2;
-    let runs: &mut [[i32; 2]] = bytemuck::cast_slice_mut(&mut lb.labels[..run_words]);
+    let runs = as_run_table(lb.labels);
     let (n_low, _) = label_runs_in(
         ImageView::packed(mask, lw, lh).map_err(|_| SegmentError::WorkspaceTooSmall)?,
         |_| 0..lw,

@@ -56,7 +56,9 @@ use crate::hist::{
     ratio_backprojection_lut_range, sum_sumsq,
 };
 use crate::image::{ImageView, Roi};
-use crate::label::{label_components_in, label_runs_in, run_span, runs_of_row, Moments};
+use crate::label::{
+    as_run_table, label_components_in, label_runs_in, run_span, runs_of_row, Moments,
+};
 use crate::morph::{close_disk_in_place, median3_binary_in, open_disk_in_place, Disk};
 use crate::object::{Objects, HIST_BINS};
 use crate::params::Params;
@@ -415,8 +417,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     // (B is 0 outside the ellipse; labelled as a run table in the label
     // buffer, crate::label::label_runs_in: the statistics and the accepted
     // mask below need the components only run by run)
-    let run_words = (labels.len() / 2) * 2;
-    let runs: &mut [[i32; 2]] = bytemuck::cast_slice_mut(&mut labels[..run_words]);
+    let runs = as_run_table(labels);
     let (n1, _) = label_runs_in(view(b, rw, rh)?, cols, runs, bufs.row_runs, |ar| {
         let ok = ar >= amin && ar <= amax;
         rej_area += !ok as u32;
@@ -547,7 +548,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             super::split::split_merged(sv, roi, (fw, fh), labels, n2, t_low, params, bufs, stats);
         (n2, Components::Labels { labels, rw })
     } else {
-        let runs: &mut [[i32; 2]] = bytemuck::cast_slice_mut(&mut labels[..run_words]);
+        let runs = as_run_table(labels);
         let (n2, _) = label_runs_in(view(a, rw, rh)?, wcols, runs, bufs.row_runs, keep)
             .map_err(|_| SegmentError::WorkspaceTooSmall)?;
         (

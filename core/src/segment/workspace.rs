@@ -94,9 +94,9 @@ pub(crate) struct RoiBufs<'a> {
     pub b: &'a mut [u8],
     pub c: &'a mut [u8],
     pub d: &'a mut [u8],
-    /// `max_pixels + height` words: an ROI's label image, or (eq. (4)'s
-    /// first labelling) its run table, which may need up to `(n + rows) / 2`
-    /// runs of 2 words ([`crate::label::run_capacity`]).
+    /// `max_pixels + height` words: an ROI's run table (both labellings;
+    /// up to `(n + rows) / 2` runs of 2 words, [`crate::label::run_capacity`])
+    /// or, with `split_merged`, its final label image.
     pub labels: &'a mut [i32],
     /// Start of each ROI row's runs in the run table (`height + 1`).
     pub row_runs: &'a mut [u32],
