@@ -81,6 +81,9 @@ pub struct Object {
     pub hist: [u32; HIST_BINS],
     /// The object's mask runs in the frame's run pool.
     pub runs: RunSpan,
+    /// The thresholding level that found it: 0 the region's own (Section
+    /// III), 1 the dim level on what level 0 left (`Params::dim_level`).
+    pub level: u8,
 }
 
 /// The objects of one frame (one camera), with their masks.

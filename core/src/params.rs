@@ -123,6 +123,15 @@ pub struct Params {
     /// (tracking success 0.564 → 0.551 on seeds 1–8, 0.582 → 0.560 on
     /// 12–16; README, "Where FishTrack stands").
     pub split_merged: bool,
+    /// Whether a region whose thresholds found an object is thresholded a
+    /// second time on the pixels its objects leave (beyond the paper;
+    /// `crate::segment::local`, "the dim level"): Otsu's τ of a region
+    /// holding a bright fish and a dim one falls between the two fish, and
+    /// eq. (1)'s τ_low — the lower class's mean — above the dim one, so
+    /// the dim fish beside a bright one is lost. The second pass sees the
+    /// region without the first pass's objects grown by the disk's radius,
+    /// and its objects pass the same tests. Default on.
+    pub dim_level: bool,
 
     /// Whether the right view is matched to the left's grey levels before
     /// the stereo pairing and the length are computed again on it, when
@@ -178,6 +187,7 @@ impl Default for Params {
             contrast_sigmas: 3.0,
             noise_floor: 1.25,
             split_merged: false,
+            dim_level: true,
             photometric: true,
             v_ref_x: -1.0,
             v_ref_y: 0.0,

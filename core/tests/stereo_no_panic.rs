@@ -56,6 +56,7 @@ fn build(objs: &[ObjSpec]) -> Objects<N, R> {
                 start,
                 len: o.runs.len() as u32 - start,
             },
+            level: 0,
         });
     }
     o

@@ -7,13 +7,14 @@
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
 //!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
-//!     [--alpha A|auto] [--split | --no-split] [--out DIR] HAUL...
+//!     [--alpha A|auto] [--split | --no-split] [--no-dim] [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
 //! gradient with one global threshold, literal θ_V, no elongation test, no
 //! local smoothing, no border exemption of the elongation test).
 //! `--split` / `--no-split` turn the split of merged objects
 //! (`Params::split_merged`, `fishtrack_core::segment::split`) on / off.
+//! `--no-dim` turns off the dim level (`Params::dim_level`).
 //! ```
 
 use std::path::PathBuf;
@@ -31,6 +32,7 @@ fn main() -> Result<()> {
     let (mut var_min, mut elong): (Option<f32>, Option<f32>) = (None, None);
     let mut smooth: Option<u8> = None;
     let mut no_bg = false;
+    let mut no_dim = false;
     let mut split: Option<bool> = None;
     let mut bg_r: Option<u8> = None;
     let mut csig: Option<f32> = None;
@@ -44,6 +46,7 @@ fn main() -> Result<()> {
             "--no-var" => no_var = true,
             "--paper" => paper = true,
             "--no-bg" => no_bg = true,
+            "--no-dim" => no_dim = true,
             "--no-split" => split = Some(false),
             "--split" => split = Some(true),
             "--contrast" => csig = Some(args.next().context("--contrast K")?.parse()?),
@@ -83,6 +86,9 @@ fn main() -> Result<()> {
         if no_bg {
             p.background = false;
         }
+        if no_dim {
+            p.dim_level = false;
+        }
         if let Some(s) = split {
             p.split_merged = s;
         }
@@ -94,6 +100,7 @@ fn main() -> Result<()> {
             p.background = false;
             p.contrast_sigmas = 0.0;
             p.split_merged = false;
+            p.dim_level = false;
         }
         if let Some(r) = bg_r {
             p.background_radius = r;

@@ -598,7 +598,7 @@ fn diag_row(
         for e in 0..2 {
             let _ = write!(
                 out,
-                ",e{e}_px,e{e}_py,e{e}_d,e{e}_mask_d,e{e}_dev,e{e}_z,e{e}_ratio,e{e}_mis,e{e}_comp,e{e}_pl,e{e}_pr"
+                ",e{e}_px,e{e}_py,e{e}_d,e{e}_mask_d,e{e}_dev,e{e}_z,e{e}_ratio,e{e}_mis,e{e}_comp,e{e}_pl,e{e}_pr,e{e}_touch"
             );
         }
         out.push('\n');
@@ -628,7 +628,7 @@ fn diag_row(
             for e in l.ends.iter() {
                 let _ = write!(
                     out,
-                    ",{},{},{},{},{},{},{},{},{},{},{}",
+                    ",{},{},{},{},{},{},{},{},{},{},{},{}",
                     e.px.0,
                     e.px.1,
                     e.d,
@@ -639,11 +639,12 @@ fn diag_row(
                     e.mismatch as u8,
                     e.compensated as u8,
                     e.probe[0],
-                    e.probe[1]
+                    e.probe[1],
+                    e.touches_other as u8
                 );
             }
         }
-        None => out.push_str(",0,,,,,,,,,,,,,,,,,,,,,,,,,,,"),
+        None => out.push_str(",0,,,,,,,,,,,,,,,,,,,,,,,,,,,,,"),
     }
     out.push('\n');
 }

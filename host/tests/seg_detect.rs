@@ -62,3 +62,47 @@ fn segmentation_precision_recall_and_length_on_small_haul() {
     assert!(measured >= 15, "measured {measured}");
     assert!(mape <= 0.12, "large-target MAPE {mape}");
 }
+
+/// The dim level (`Params::dim_level`, beyond the paper) on the same kind
+/// of hauls: it must find fish that level 0 alone misses (more true
+/// positives) and only a few false ones.
+#[test]
+fn dim_level_adds_fish_not_false_alarms() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut tot = [[0u64; 3]; 2]; // [off, on] × [tp, fp, fn]
+    for seed in 1..=8u64 {
+        let haul = dir.path().join(format!("haul{seed}"));
+        let cfg = SynthConfig {
+            frames: 12,
+            seed,
+            size: 768,
+            ..SynthConfig::default()
+        };
+        write_haul(&haul, &cfg).unwrap();
+        for (k, on) in [false, true].into_iter().enumerate() {
+            let out = dir.path().join(format!("out{seed}_{on}"));
+            let mut params = Params::for_frame(768);
+            params.dim_level = on;
+            detect_haul(&haul, &params, &out).unwrap();
+            let d = evaluate(&haul, &out)
+                .unwrap()
+                .segmentation
+                .unwrap()
+                .detection;
+            eprintln!(
+                "seed {seed} dim_level {on}: tp {} fp {} fn {}",
+                d.tp, d.fp, d.fn_
+            );
+            for (t, v) in tot[k].iter_mut().zip([d.tp, d.fp, d.fn_]) {
+                *t += v;
+            }
+        }
+    }
+    let ([tp0, fp0, _], [tp1, fp1, _]) = (tot[0], tot[1]);
+    eprintln!("pooled: off {:?}, on {:?}", tot[0], tot[1]);
+    assert!(tp1 > tp0, "no fish added: {tot:?}");
+    assert!(
+        fp1 <= fp0 + (tp1 - tp0),
+        "more false alarms than fish added: {tot:?}"
+    );
+}

@@ -34,6 +34,23 @@
 //!   (beyond the paper) objects less elongated than `min_elongation` are
 //!   dropped ([`elongated_enough`]) unless the frame border cuts them
 //!   ([`cut_by_border`]).
+//! - The dim level (beyond the paper, `Params::dim_level`): Otsu's τ of a
+//!   region holding a bright fish and a dim one falls between them and
+//!   eq. (1)'s τ_low above the dim one, which is lost. So once level 0
+//!   (all of the above) has final components, the pixels within Chebyshev
+//!   distance `disk_size` of them are set to 0 ([`clear_grown`]: the
+//!   blurred rims of a bright fish would ring it) and taken out of the
+//!   histogram, and the region runs once more (level 1) on what is left —
+//!   only if its τ is below level 0's and at least half an object's area
+//!   stands [`DIM_LEVEL_SIGMAS`] water σ above the remainder's water
+//!   (Otsu's lower class; the gate costs one histogram). Its τ_low, τ_high
+//!   are kept [`DIM_LEVEL_FLOOR`] σ above the water, its objects must pass
+//!   the contrast test at `DIM_LEVEL_SIGMAS` (the variance limit is no
+//!   test there: the remainder's water has no fish to set it apart), and a
+//!   level-1 object touching the cleared pixels and under half the largest
+//!   level-0 object is that object's dim tail or fin, not a fish
+//!   (`SegmentStats::rejected_fragment`). Level-0 objects win duplicates
+//!   ([`super::emit`]).
 //!
 //! Both labellings (eq. (4)'s and the final one) are run tables in the
 //! label buffer ([`crate::label::label_runs_in`]: the same components and
@@ -74,6 +91,13 @@ pub const BP_RANGE_PERCENTILE: u32 = 99;
 /// least this noisy and is scaled down in proportion to the measured
 /// noise variance on quieter ones.
 pub const NOISE_REF_VAR: f32 = 9.0;
+
+/// Least contrast, in water σ, of an object of the dim level
+/// (`Params::dim_level`).
+pub const DIM_LEVEL_SIGMAS: f32 = 4.0;
+
+/// Least τ_low and τ_high of the dim level above the water, in water σ.
+pub const DIM_LEVEL_FLOOR: [f32; 2] = [1.0, 2.0];
 
 /// The limit of eq. (6). Paper-faithful (`variance_literal`): θ_V. By
 /// default (beyond the paper) `θ_V · min(1, σ_n² / NOISE_REF_VAR)`, σ_n
@@ -241,6 +265,87 @@ fn close_open_window(
     Ok([x0, y0, x1, y1])
 }
 
+/// Clears to 0 the pixels of the packed `rw × rh` buffer `d` within
+/// Chebyshev distance `r` of a pixel of a final component of `comp`
+/// (labels > 0, all inside the window `win` = `[x0, y0, x1, y1)`): the
+/// square dilation by `2r + 1`, separable — each run grown by `r` on both
+/// sides into `marks`, then a running per-column count of the marked rows
+/// within `r` (`count`, one row). `marks`, `count`: scratch of `rw · rh`
+/// and `rw` bytes. Each cleared nonzero pixel inside the ellipse (`spans`,
+/// row `j`'s columns `[s0, s1)`) is taken out of its histogram `h`, which
+/// so stays the histogram of the ellipse's pixels without a second pass.
+#[allow(clippy::too_many_arguments)]
+fn clear_grown(
+    comp: &Components<'_>,
+    d: &mut [u8],
+    (marks, count): (&mut [u8], &mut [u8]),
+    (rw, rh): (usize, usize),
+    win: [usize; 4],
+    r: usize,
+    spans: &[[i32; 2]],
+    h: &mut [u32; 256],
+) -> Result<(), SegmentError> {
+    let (y0, y1) = (win[1], win[3].min(rh));
+    if y0 >= y1 || r > 127 {
+        return Ok(());
+    }
+    let (x0, x1) = (win[0].saturating_sub(r), (win[2] + r).min(rw));
+    let marks = marks
+        .get_mut(..rw * rh)
+        .ok_or(SegmentError::WorkspaceTooSmall)?;
+    let count = count.get_mut(..rw).ok_or(SegmentError::WorkspaceTooSmall)?;
+    for j in y0..y1 {
+        let row = marks
+            .get_mut(j * rw..(j + 1) * rw)
+            .ok_or(SegmentError::WorkspaceTooSmall)?;
+        row.fill(0);
+        comp.for_row(j, |l, i0, i1| {
+            if l > 0 {
+                if let Some(part) = row.get_mut(i0.saturating_sub(r)..(i1 + r).min(rw)) {
+                    part.fill(1);
+                }
+            }
+        });
+    }
+    let marks = &*marks;
+    let row_of = |j: usize| marks.get(j * rw + x0..j * rw + x1).unwrap_or(&[]);
+    let count = count.get_mut(x0..x1).unwrap_or(&mut []);
+    count.fill(0);
+    let jo0 = y0.saturating_sub(r);
+    for j in y0..(jo0 + r).min(y1) {
+        count.iter_mut().zip(row_of(j)).for_each(|(c, &m)| *c += m);
+    }
+    for jo in jo0..(y1 + r).min(rh) {
+        // the marked rows within r of row jo: add jo + r, drop jo − r − 1
+        if jo + r < y1 {
+            count
+                .iter_mut()
+                .zip(row_of(jo + r))
+                .for_each(|(c, &m)| *c += m);
+        }
+        if let Some(old) = jo.checked_sub(r + 1).filter(|&o| o >= y0 && o < y1) {
+            count
+                .iter_mut()
+                .zip(row_of(old))
+                .for_each(|(c, &m)| *c -= m);
+        }
+        let sp = spans.get(jo).copied().unwrap_or([0, 0]);
+        let (s0, s1) = (sp[0].max(0) as usize, sp[1].max(0) as usize);
+        if let Some(drow) = d.get_mut(jo * rw + x0..jo * rw + x1) {
+            for (x, (p, &c)) in (x0..).zip(drow.iter_mut().zip(count.iter())) {
+                if c > 0 {
+                    if *p != 0 && x >= s0 && x < s1 {
+                        let v = &mut h[*p as usize];
+                        *v = v.saturating_sub(1);
+                    }
+                    *p = 0;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Clears `rec` to an empty statistics record.
 fn clear_rec(rec: &mut [u64; STAT_WORDS]) {
     *rec = [0; STAT_WORDS];
@@ -323,304 +428,409 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             }
         }
     }
-    let sv = view(d, rw, rh)?;
-
-    // --- double local thresholding, eq. (1) ---
+    // level 0 is the paper's; level 1 (`dim_level`) the region again
+    // without level 0's objects, which are cleared to 0 in `d`
+    let levels = 1 + params.dim_level as usize;
+    let mut tau_above = u8::MAX;
+    // the largest level-0 object, and which level-1 components touch the
+    // pixels level 0 cleared
+    let mut area0 = 0u64;
+    let mut touches = [false; super::MAX_ROI_COMPONENTS];
+    // the ellipse's histogram: level 0 counts it, level 1 takes the cleared
+    // pixels out (`clear_grown`)
     let mut h256 = [0u32; 256];
-    let mut total = 0u64;
-    for (j, sp) in spans.iter().enumerate() {
-        let row = sv.row(j).get(span(sp)).unwrap_or(&[]);
-        add_row_256(&mut h256, row);
-        total += row.len() as u64;
-    }
-    if total == 0 {
-        stats.regions_empty += 1;
-        return Ok(());
-    }
-    if total < params.area_min as u64 {
-        // no object inside the ellipse can pass eq. (4)
-        stats.regions_small += 1;
-        return Ok(());
-    }
-    let tau = otsu(&h256);
-    let (t_low, t_high) = if params.double_threshold {
-        let mu = lower_class_mean(&h256, tau);
-        (
-            shifted_threshold(tau, mu, params.p_low),
-            shifted_threshold(tau, mu, params.p_high),
-        )
-    } else {
-        (tau, tau)
-    };
-    trace(&RegionTrace {
-        region: reg,
-        roi,
-        tau,
-        t_low,
-        t_high,
-    });
-    for (j, sp) in spans.iter().enumerate() {
-        let r = span(sp);
-        let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
-        let (ra, rb) = (&mut a[j * rw..(j + 1) * rw], &mut b[j * rw..(j + 1) * rw]);
-        ra.fill(0);
-        rb.fill(0);
-        let (ra, rb) = (&mut ra[r.clone()], &mut rb[r]);
-        for ((&p, va), vb) in row.iter().zip(ra.iter_mut()).zip(rb.iter_mut()) {
-            *va = if p > t_low { 255 } else { 0 };
-            *vb = if p > t_high { 255 } else { 0 };
-        }
-    }
-    // 3 × 3 median on both masks (M_low into `c`, M_high into `a`),
-    // restricted to the ellipse again
-    let cols = |j: usize| spans.get(j).map_or(0..0, span);
-    median3_binary_in(view(a, rw, rh)?, c, cols).map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    median3_binary_in(view(b, rw, rh)?, a, cols).map_err(|_| SegmentError::WorkspaceTooSmall)?;
+    for level in 0..levels {
+        let sv = view(d, rw, rh)?;
 
-    // --- histogram backprojection, eq. (2)–(3): B into `b` ---
-    if params.double_threshold && params.backprojection {
-        let (mut hl, mut hh) = ([0u32; 256], [0u32; 256]);
-        // (both masks are 0 outside the ellipse)
-        for (j, sp) in spans.iter().enumerate() {
-            let r = span(sp);
-            let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
-            let (rc, ra) = (
-                &c[j * rw..(j + 1) * rw][r.clone()],
-                &a[j * rw..(j + 1) * rw][r],
-            );
-            add_masked_pair_256(&mut hl, &mut hh, row, rc, ra);
-        }
-        let bins = (params.hist_bins as usize).clamp(1, 256);
-        let (mut bl, mut bh) = ([0u32; 256], [0u32; 256]);
-        // bins over the region's range [⌊τ_low⌋, p99] (crate::hist::range_bin)
-        let (lo, hi) = (t_low, percentile_256(&h256, BP_RANGE_PERCENTILE).max(t_low));
-        fold_bins_range(&hl, lo, hi, &mut bl[..bins]);
-        fold_bins_range(&hh, lo, hi, &mut bh[..bins]);
-        let lut = ratio_backprojection_lut_range(&bh[..bins], &bl[..bins], lo, hi, params.theta_bp);
-        let lut = lut.map(|v| if v { 255u8 } else { 0 });
-        for (j, sp) in spans.iter().enumerate() {
-            let r = span(sp);
-            let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
-            let rb = &mut b[j * rw..(j + 1) * rw];
-            rb.fill(0);
-            for (&p, vb) in row.iter().zip(&mut rb[r]) {
-                *vb = lut[p as usize];
+        // --- double local thresholding, eq. (1) ---
+        if level == 0 {
+            for (j, sp) in spans.iter().enumerate() {
+                add_row_256(&mut h256, sv.row(j).get(span(sp)).unwrap_or(&[]));
             }
-        }
-    } else {
-        b.copy_from_slice(a);
-    }
-
-    // --- area and variance rejection, eq. (4)–(6): accepted mask into `a` ---
-    let (amin, amax) = (params.area_min, params.area_max);
-    let mut rej_area = 0u32;
-    // (B is 0 outside the ellipse; labelled as a run table in the label
-    // buffer, crate::label::label_runs_in: the statistics and the accepted
-    // mask below need the components only run by run)
-    let runs = as_run_table(labels);
-    let (n1, _) = label_runs_in(view(b, rw, rh)?, cols, runs, bufs.row_runs, |ar| {
-        let ok = ar >= amin && ar <= amax;
-        rej_area += !ok as u32;
-        ok
-    })
-    .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-    stats.rejected_area += rej_area;
-    let row_runs = &*bufs.row_runs;
-    let runs = &*runs;
-    let runs_of = |j: usize| runs_of_row(runs, row_runs, j);
-
-    let cap = recs.len().min(super::MAX_ROI_COMPONENTS);
-    let n1s = (n1 as usize).min(cap);
-    stats.label_overflow += n1 - n1s as u32;
-    for rec in recs.iter_mut().take(n1s) {
-        clear_rec(rec);
-    }
-    for j in 0..rh {
-        let (row, srow) = (pv.row(j), sv.row(j));
-        for run in runs_of(j) {
-            let l = run[1];
-            if l <= 0 || l as usize > n1s {
-                continue;
-            }
-            let Some(rec) = recs.get_mut(l as usize - 1) else {
-                continue;
-            };
-            let r = run_span(run[0]);
-            let (s1, s2) = sum_sumsq(row.get(r.clone()).unwrap_or(&[]));
-            let (q1, _) = sum_sumsq(srow.get(r.clone()).unwrap_or(&[]));
-            rec[0] += r.len() as u64;
-            rec[10] += s1;
-            rec[11] += s2;
-            rec[12] += q1;
-        }
-    }
-    // the water of eq. (1)'s lower class, for the contrast test
-    let (w_med, w_sigma) = water_level(&h256, tau);
-    // accepted flag in word 27
-    for rec in recs.iter_mut().take(n1s) {
-        let (cnt, s1, s2) = (rec[0] as f64, rec[10] as f64, rec[11] as f64);
-        let var = if cnt > 1.0 {
-            (s2 - s1 * s1 / cnt) / (cnt - 1.0)
         } else {
-            0.0
-        };
-        let contrast = if cnt > 0.0 {
-            rec[12] as f64 / cnt - w_med as f64
+            // the cleared pixels (and level 0's own zeros) are out
+            h256[0] = 0;
+        }
+        let total: u64 = h256.iter().map(|&v| v as u64).sum();
+        if total == 0 {
+            stats.regions_empty += (level == 0) as u32;
+            return Ok(());
+        }
+        if total < params.area_min as u64 {
+            // no object inside the ellipse can pass eq. (4)
+            stats.regions_small += (level == 0) as u32;
+            return Ok(());
+        }
+        let tau = otsu(&h256);
+        if level > 0 && tau >= tau_above {
+            // the remainder splits no lower than the first pass did
+            return Ok(());
+        }
+        tau_above = tau;
+        let (t_low, t_high) = if params.double_threshold {
+            let mu = lower_class_mean(&h256, tau);
+            (
+                shifted_threshold(tau, mu, params.p_low),
+                shifted_threshold(tau, mu, params.p_high),
+            )
         } else {
-            0.0
+            (tau, tau)
         };
-        let ok = !params.variance_rejection
-            || var >= stats.var_limit as f64
-            || (params.contrast_sigmas > 0.0
-                && contrast
-                    >= params.contrast_sigmas as f64 * w_sigma.max(params.noise_floor) as f64);
-        if !ok {
-            stats.rejected_variance += 1;
-        }
-        rec[STAT_WORDS - 1] = ok as u64;
-    }
-    // accepted labels as a table (index = label; 0 and overflow rejected)
-    let mut acc = [0u8; super::MAX_ROI_COMPONENTS + 1];
-    for (k, rec) in recs.iter().enumerate().take(n1s) {
-        if let Some(v) = acc.get_mut(k + 1) {
-            *v = if rec[STAT_WORDS - 1] == 1 { 255 } else { 0 };
-        }
-    }
-    if !acc.iter().any(|&v| v != 0) {
-        return Ok(());
-    }
-    // the accepted pixels' bounding box [x0, x1) × [y0, y1), ROI coordinates
-    let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
-    for j in 0..rh {
-        let Some(ra) = a.get_mut(j * rw..(j + 1) * rw) else {
-            break;
-        };
-        ra.fill(0);
-        for run in runs_of(j) {
-            let v = acc.get(run[1].max(0) as usize).copied().unwrap_or(0);
-            if v == 0 {
-                continue;
+        // the water of eq. (1)'s lower class, for the contrast test
+        let (w_med, w_sigma) = water_level(&h256, tau);
+        let (t_low, t_high) = if level > 0 {
+            let s = w_sigma.max(params.noise_floor);
+            // no dim fish unless half an object's area stands out of the water
+            // as its mean must (the contrast test below)
+            let t = w_med as f32 + DIM_LEVEL_SIGMAS * s;
+            let from = (libm::ceilf(t).min(256.0)) as usize;
+            let bright: u64 = h256
+                .get(from..)
+                .unwrap_or(&[])
+                .iter()
+                .map(|&v| v as u64)
+                .sum();
+            if 2 * bright < params.area_min as u64 {
+                return Ok(());
             }
-            let r = run_span(run[0]);
-            bbox = [
-                bbox[0].min(r.start),
-                bbox[1].min(j),
-                bbox[2].max(r.end),
-                bbox[3].max(j + 1),
-            ];
-            if let Some(part) = ra.get_mut(r) {
-                part.fill(v);
-            }
-        }
-    }
-
-    // --- post-processing, Section III.D: closing then opening ---
-    let disk = Disk::opencv_ellipse(params.disk_size);
-    let win = close_open_window(a, (rw, rh), bbox, &disk, b, c, disk_scratch)?;
-
-    // --- final components and their statistics ---
-    // (labelled on the window only, outside which the mask is 0: as a run
-    // table, or — for the split of merged objects, which reads and rewrites
-    // whole label rows — as a label image of the whole box)
-    let win = if params.split_merged {
-        [0, 0, rw, rh]
-    } else {
-        win
-    };
-    let wcols = |j: usize| {
-        if j >= win[1] && j < win[3] {
-            win[0]..win[2]
+            stats.dim_levels += 1;
+            // the dim level's τ may fall in the water itself (a small dim fish,
+            // or none): its thresholds stay DIM_LEVEL_FLOOR water σ above it
+            let floor = |k: f32| (w_med as f32 + k * s).min(255.0) as u8;
+            (
+                t_low.max(floor(DIM_LEVEL_FLOOR[0])),
+                t_high.max(floor(DIM_LEVEL_FLOOR[1])),
+            )
         } else {
-            0..0
-        }
-    };
-    let keep = |ar: u32| ar >= amin && ar <= amax;
-    let (n2, comp) = if params.split_merged {
-        let labels = labels.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
-        let n2 = label_components_in(view(a, rw, rh)?, labels, wcols, keep)
-            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-        let bufs = super::split::SplitBufs {
-            lab8: a,
-            level: b,
-            part: c,
+            (t_low, t_high)
         };
-        let n2 =
-            super::split::split_merged(sv, roi, (fw, fh), labels, n2, t_low, params, bufs, stats);
-        (n2, Components::Labels { labels, rw })
-    } else {
-        let runs = as_run_table(labels);
-        let (n2, _) = label_runs_in(view(a, rw, rh)?, wcols, runs, bufs.row_runs, keep)
-            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
-        (
-            n2,
-            Components::Runs {
-                runs,
-                row_start: bufs.row_runs,
-            },
-        )
-    };
-    let n2s = (n2 as usize).min(cap);
-    stats.label_overflow += n2 - n2s as u32;
-    for rec in recs.iter_mut().take(n2s) {
-        clear_rec(rec);
-    }
-    for j in win[1]..win[3] {
-        let row = pv.row(j);
-        let y = roi.y + j as u32;
-        comp.for_row(j, |l, i0, i1| {
-            if l <= 0 || l as usize > n2s {
-                return;
-            }
-            let Some(rec) = recs.get_mut(l as usize - 1) else {
-                return;
-            };
-            let px = row.get(i0..i1).unwrap_or(&[]);
-            let (s1, s2) = sum_sumsq(px);
-            rec[10] += s1;
-            rec[11] += s2;
-            // (two u32 sub-histograms in turn: a run of equal levels does
-            // not chain every increment on one counter's store)
-            let mut hs = [[0u32; HIST_BINS]; 2];
-            let pairs = px.chunks_exact(2);
-            let rest = pairs.remainder();
-            for q in pairs {
-                hs[0][bin_of(q[0], HIST_BINS)] += 1;
-                hs[1][bin_of(q[1], HIST_BINS)] += 1;
-            }
-            for &p in rest {
-                hs[0][bin_of(p, HIST_BINS)] += 1;
-            }
-            for ((r, &a), &b) in rec[12..12 + HIST_BINS].iter_mut().zip(&hs[0]).zip(&hs[1]) {
-                *r += (a + b) as u64;
-            }
-            let mut m = Moments::from_words(&rec[..10]);
-            m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
-            m.to_words(&mut rec[..10]);
-        });
-    }
-    for k in 0..n2s {
-        let Some(rec) = recs.get(k) else { break };
-        let mut hist = [0u32; HIST_BINS];
-        for (hv, &r) in hist.iter_mut().zip(&rec[12..12 + HIST_BINS]) {
-            *hv = r as u32;
-        }
-        let m = Moments::from_words(&rec[..10]);
-        if !elongated_enough(&m, params.min_elongation) && !cut_by_border(&m, fw, fh, params) {
-            stats.rejected_shape += 1;
-            continue;
-        }
-        let cand = Candidate {
-            m,
-            sum: rec[10],
-            sumsq: rec[11],
-            hist,
-        };
-        let mask = MaskRef {
-            comp: &comp,
+        trace(&RegionTrace {
+            region: reg,
             roi,
-            label: k as i32 + 1,
+            level: level as u8,
+            tau,
+            t_low,
+            t_high,
+        });
+        for (j, sp) in spans.iter().enumerate() {
+            let r = span(sp);
+            let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
+            let (ra, rb) = (&mut a[j * rw..(j + 1) * rw], &mut b[j * rw..(j + 1) * rw]);
+            ra.fill(0);
+            rb.fill(0);
+            let (ra, rb) = (&mut ra[r.clone()], &mut rb[r]);
+            for ((&p, va), vb) in row.iter().zip(ra.iter_mut()).zip(rb.iter_mut()) {
+                *va = if p > t_low { 255 } else { 0 };
+                *vb = if p > t_high { 255 } else { 0 };
+            }
+        }
+        // 3 × 3 median on both masks (M_low into `c`, M_high into `a`),
+        // restricted to the ellipse again
+        let cols = |j: usize| spans.get(j).map_or(0..0, span);
+        median3_binary_in(view(a, rw, rh)?, c, cols)
+            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+        median3_binary_in(view(b, rw, rh)?, a, cols)
+            .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+
+        // --- histogram backprojection, eq. (2)–(3): B into `b` ---
+        if params.double_threshold && params.backprojection {
+            let (mut hl, mut hh) = ([0u32; 256], [0u32; 256]);
+            // (both masks are 0 outside the ellipse)
+            for (j, sp) in spans.iter().enumerate() {
+                let r = span(sp);
+                let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
+                let (rc, ra) = (
+                    &c[j * rw..(j + 1) * rw][r.clone()],
+                    &a[j * rw..(j + 1) * rw][r],
+                );
+                add_masked_pair_256(&mut hl, &mut hh, row, rc, ra);
+            }
+            let bins = (params.hist_bins as usize).clamp(1, 256);
+            let (mut bl, mut bh) = ([0u32; 256], [0u32; 256]);
+            // bins over the region's range [⌊τ_low⌋, p99] (crate::hist::range_bin)
+            let (lo, hi) = (t_low, percentile_256(&h256, BP_RANGE_PERCENTILE).max(t_low));
+            fold_bins_range(&hl, lo, hi, &mut bl[..bins]);
+            fold_bins_range(&hh, lo, hi, &mut bh[..bins]);
+            let lut =
+                ratio_backprojection_lut_range(&bh[..bins], &bl[..bins], lo, hi, params.theta_bp);
+            let lut = lut.map(|v| if v { 255u8 } else { 0 });
+            for (j, sp) in spans.iter().enumerate() {
+                let r = span(sp);
+                let row = sv.row(j).get(r.clone()).unwrap_or(&[]);
+                let rb = &mut b[j * rw..(j + 1) * rw];
+                rb.fill(0);
+                for (&p, vb) in row.iter().zip(&mut rb[r]) {
+                    *vb = lut[p as usize];
+                }
+            }
+        } else {
+            b.copy_from_slice(a);
+        }
+
+        // --- area and variance rejection, eq. (4)–(6): accepted mask into `a` ---
+        let (amin, amax) = (params.area_min, params.area_max);
+        let mut rej_area = 0u32;
+        // (B is 0 outside the ellipse; labelled as a run table in the label
+        // buffer, crate::label::label_runs_in: the statistics and the accepted
+        // mask below need the components only run by run)
+        let runs = as_run_table(labels);
+        let (n1, _) = label_runs_in(view(b, rw, rh)?, cols, runs, bufs.row_runs, |ar| {
+            let ok = ar >= amin && ar <= amax;
+            rej_area += !ok as u32;
+            ok
+        })
+        .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+        stats.rejected_area += rej_area;
+        let row_runs = &*bufs.row_runs;
+        let runs = &*runs;
+        let runs_of = |j: usize| runs_of_row(runs, row_runs, j);
+
+        let cap = recs.len().min(super::MAX_ROI_COMPONENTS);
+        let n1s = (n1 as usize).min(cap);
+        stats.label_overflow += n1 - n1s as u32;
+        for rec in recs.iter_mut().take(n1s) {
+            clear_rec(rec);
+        }
+        for j in 0..rh {
+            let (row, srow) = (pv.row(j), sv.row(j));
+            for run in runs_of(j) {
+                let l = run[1];
+                if l <= 0 || l as usize > n1s {
+                    continue;
+                }
+                let Some(rec) = recs.get_mut(l as usize - 1) else {
+                    continue;
+                };
+                let r = run_span(run[0]);
+                let (s1, s2) = sum_sumsq(row.get(r.clone()).unwrap_or(&[]));
+                let (q1, _) = sum_sumsq(srow.get(r.clone()).unwrap_or(&[]));
+                rec[0] += r.len() as u64;
+                rec[10] += s1;
+                rec[11] += s2;
+                rec[12] += q1;
+            }
+        }
+        // accepted flag in word 27
+        for rec in recs.iter_mut().take(n1s) {
+            let (cnt, s1, s2) = (rec[0] as f64, rec[10] as f64, rec[11] as f64);
+            let var = if cnt > 1.0 {
+                (s2 - s1 * s1 / cnt) / (cnt - 1.0)
+            } else {
+                0.0
+            };
+            let contrast = if cnt > 0.0 {
+                rec[12] as f64 / cnt - w_med as f64
+            } else {
+                0.0
+            };
+            let k = if level > 0 {
+                DIM_LEVEL_SIGMAS
+            } else {
+                params.contrast_sigmas
+            };
+            let stands_out = contrast >= k as f64 * w_sigma.max(params.noise_floor) as f64;
+            let ok = if level > 0 {
+                // the dim level's water has no bright fish to set τ apart:
+                // its objects must stand out from it
+                stands_out
+            } else {
+                !params.variance_rejection
+                    || var >= stats.var_limit as f64
+                    || (params.contrast_sigmas > 0.0 && stands_out)
+            };
+            if !ok {
+                stats.rejected_variance += 1;
+            }
+            rec[STAT_WORDS - 1] = ok as u64;
+        }
+        // accepted labels as a table (index = label; 0 and overflow rejected)
+        let mut acc = [0u8; super::MAX_ROI_COMPONENTS + 1];
+        for (k, rec) in recs.iter().enumerate().take(n1s) {
+            if let Some(v) = acc.get_mut(k + 1) {
+                *v = if rec[STAT_WORDS - 1] == 1 { 255 } else { 0 };
+            }
+        }
+        if !acc.iter().any(|&v| v != 0) {
+            return Ok(());
+        }
+        // the accepted pixels' bounding box [x0, x1) × [y0, y1), ROI coordinates
+        let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
+        for j in 0..rh {
+            let Some(ra) = a.get_mut(j * rw..(j + 1) * rw) else {
+                break;
+            };
+            ra.fill(0);
+            for run in runs_of(j) {
+                let v = acc.get(run[1].max(0) as usize).copied().unwrap_or(0);
+                if v == 0 {
+                    continue;
+                }
+                let r = run_span(run[0]);
+                bbox = [
+                    bbox[0].min(r.start),
+                    bbox[1].min(j),
+                    bbox[2].max(r.end),
+                    bbox[3].max(j + 1),
+                ];
+                if let Some(part) = ra.get_mut(r) {
+                    part.fill(v);
+                }
+            }
+        }
+
+        // --- post-processing, Section III.D: closing then opening ---
+        let disk = Disk::opencv_ellipse(params.disk_size);
+        let win = close_open_window(a, (rw, rh), bbox, &disk, b, c, disk_scratch)?;
+
+        // --- final components and their statistics ---
+        // (labelled on the window only, outside which the mask is 0: as a run
+        // table, or — for the split of merged objects, which reads and rewrites
+        // whole label rows — as a label image of the whole box)
+        let win = if params.split_merged {
+            [0, 0, rw, rh]
+        } else {
+            win
         };
-        emit(out, &cand, &mask, stats);
+        let wcols = |j: usize| {
+            if j >= win[1] && j < win[3] {
+                win[0]..win[2]
+            } else {
+                0..0
+            }
+        };
+        let keep = |ar: u32| ar >= amin && ar <= amax;
+        let (n2, comp) = if params.split_merged {
+            let labels = labels.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
+            let n2 = label_components_in(view(a, rw, rh)?, labels, wcols, keep)
+                .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+            let bufs = super::split::SplitBufs {
+                lab8: a,
+                level: b,
+                part: c,
+            };
+            let n2 = super::split::split_merged(
+                sv,
+                roi,
+                (fw, fh),
+                labels,
+                n2,
+                t_low,
+                params,
+                bufs,
+                stats,
+            );
+            (n2, Components::Labels { labels, rw })
+        } else {
+            let runs = as_run_table(labels);
+            let (n2, _) = label_runs_in(view(a, rw, rh)?, wcols, runs, bufs.row_runs, keep)
+                .map_err(|_| SegmentError::WorkspaceTooSmall)?;
+            (
+                n2,
+                Components::Runs {
+                    runs,
+                    row_start: bufs.row_runs,
+                },
+            )
+        };
+        let n2s = (n2 as usize).min(cap);
+        stats.label_overflow += n2 - n2s as u32;
+        for rec in recs.iter_mut().take(n2s) {
+            clear_rec(rec);
+        }
+        touches.fill(false);
+        for j in win[1]..win[3] {
+            let row = pv.row(j);
+            let y = roi.y + j as u32;
+            comp.for_row(j, |l, i0, i1| {
+                if l <= 0 || l as usize > n2s {
+                    return;
+                }
+                if level > 0 {
+                    // a pixel of the run or of its 8-neighbours cleared
+                    let (x0, x1) = (i0.saturating_sub(1), (i1 + 1).min(rw));
+                    let hit = (j.saturating_sub(1)..(j + 2).min(rh))
+                        .any(|jj| sv.row(jj).get(x0..x1).is_some_and(|r| r.contains(&0)));
+                    if let Some(t) = touches.get_mut(l as usize - 1) {
+                        *t |= hit;
+                    }
+                }
+                let Some(rec) = recs.get_mut(l as usize - 1) else {
+                    return;
+                };
+                let px = row.get(i0..i1).unwrap_or(&[]);
+                let (s1, s2) = sum_sumsq(px);
+                rec[10] += s1;
+                rec[11] += s2;
+                // (two u32 sub-histograms in turn: a run of equal levels does
+                // not chain every increment on one counter's store)
+                let mut hs = [[0u32; HIST_BINS]; 2];
+                let pairs = px.chunks_exact(2);
+                let rest = pairs.remainder();
+                for q in pairs {
+                    hs[0][bin_of(q[0], HIST_BINS)] += 1;
+                    hs[1][bin_of(q[1], HIST_BINS)] += 1;
+                }
+                for &p in rest {
+                    hs[0][bin_of(p, HIST_BINS)] += 1;
+                }
+                for ((r, &a), &b) in rec[12..12 + HIST_BINS].iter_mut().zip(&hs[0]).zip(&hs[1]) {
+                    *r += (a + b) as u64;
+                }
+                let mut m = Moments::from_words(&rec[..10]);
+                m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
+                m.to_words(&mut rec[..10]);
+            });
+        }
+        for k in 0..n2s {
+            let Some(rec) = recs.get(k) else { break };
+            let mut hist = [0u32; HIST_BINS];
+            for (hv, &r) in hist.iter_mut().zip(&rec[12..12 + HIST_BINS]) {
+                *hv = r as u32;
+            }
+            let m = Moments::from_words(&rec[..10]);
+            if !elongated_enough(&m, params.min_elongation) && !cut_by_border(&m, fw, fh, params) {
+                stats.rejected_shape += 1;
+                continue;
+            }
+            if level == 0 {
+                area0 = area0.max(m.area);
+            } else if touches.get(k).copied().unwrap_or(false) && 2 * m.area < area0 {
+                // a dim part of a level-0 fish (its tail, a fin), not a fish
+                stats.rejected_fragment += 1;
+                continue;
+            }
+            let cand = Candidate {
+                m,
+                sum: rec[10],
+                sumsq: rec[11],
+                hist,
+                level: level as u8,
+            };
+            let mask = MaskRef {
+                comp: &comp,
+                roi,
+                label: k as i32 + 1,
+            };
+            emit(out, &cand, &mask, stats);
+        }
+        if n2s == 0 {
+            // nothing to clear: level 1 would split the region as level 0 did
+            break;
+        }
+        if level + 1 < levels {
+            // level 1 sees the region without the final components grown by
+            // the disk's side (their blurred rims would ring them)
+            clear_grown(
+                &comp,
+                d,
+                (a, c),
+                (rw, rh),
+                win,
+                params.disk_size as usize,
+                spans,
+                &mut h256,
+            )?;
+        }
     }
     Ok(())
 }
@@ -664,6 +874,52 @@ mod tests {
             let mut win = std::vec![0u8; w * h];
             close_open_window(&mut a, (w, h), bbox, &disk, &mut win, &mut tmp, &mut scratch).unwrap();
             proptest::prop_assert_eq!(a, whole);
+        }
+
+        /// `clear_grown` clears exactly the pixels within Chebyshev distance
+        /// r of a labelled pixel, and takes exactly the cleared nonzero
+        /// pixels inside the spans out of the histogram.
+        #[test]
+        fn clear_grown_equals_naive_dilation(w in 1usize..60, h in 1usize..50,
+                                             r in 0usize..9, dens in 0u64..6,
+                                             seed in proptest::prelude::any::<u64>()) {
+            let mut s = seed | 1;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+            let labels: std::vec::Vec<i32> = (0..w * h)
+                .map(|_| if next() % 64 < dens { (next() % 3) as i32 + 1 } else { 0 })
+                .collect();
+            let d0: std::vec::Vec<u8> = (0..w * h).map(|_| (next() % 8) as u8).collect();
+            let spans: std::vec::Vec<[i32; 2]> = (0..h)
+                .map(|_| { let a = (next() % (w as u64 + 2)) as i32 - 1; [a, a + (next() % (w as u64 + 1)) as i32] })
+                .collect();
+            let mut h0 = [0u32; 256];
+            for (j, sp) in spans.iter().enumerate() {
+                for x in (sp[0].max(0) as usize).min(w)..(sp[1].max(0) as usize).min(w) {
+                    h0[d0[j * w + x] as usize] += 1;
+                }
+            }
+            // naive: every pixel against every labelled pixel
+            let (mut want, mut want_h) = (d0.clone(), h0);
+            for y in 0..h {
+                for x in 0..w {
+                    let near = (y.saturating_sub(r)..(y + r + 1).min(h)).any(|yy| {
+                        (x.saturating_sub(r)..(x + r + 1).min(w)).any(|xx| labels[yy * w + xx] > 0)
+                    });
+                    if near {
+                        let sp = spans[y];
+                        if want[y * w + x] != 0 && (x as i32) >= sp[0] && (x as i32) < sp[1] {
+                            want_h[want[y * w + x] as usize] -= 1;
+                        }
+                        want[y * w + x] = 0;
+                    }
+                }
+            }
+            let comp = Components::Labels { labels: &labels, rw: w };
+            let (mut d, mut got_h) = (d0.clone(), h0);
+            let (mut marks, mut count) = (std::vec![9u8; w * h], std::vec![9u8; w]);
+            clear_grown(&comp, &mut d, (&mut marks, &mut count), (w, h), [0, 0, w, h], r, &spans, &mut got_h).unwrap();
+            proptest::prop_assert_eq!(d, want);
+            proptest::prop_assert_eq!(got_h, want_h);
         }
     }
 }

@@ -19,8 +19,15 @@
 //!    touching fish where a higher threshold separates them into stable,
 //!    elongated parts.
 //!
+//!    After a region's objects are found (beyond the paper,
+//!    `Params::dim_level`, default on), its pixels within the disk's side of
+//!    them are cleared and the region is thresholded again, once: the
+//!    "dim level" finds the dim fish beside a bright one that eq. (1)'s
+//!    τ_low, set between the two, left out ([`local`]).
+//!
 //! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
-//! split_merged: false, .. }` is the paper's Section III exactly.
+//! split_merged: false, dim_level: false, .. }` is the paper's Section III
+//! exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
 //!
@@ -28,9 +35,11 @@
 //! so a fish can be segmented in several regions (whole in its own, often
 //! cut by the ellipse in a neighbour's). A new object whose mask shares
 //! more than half of the smaller mask's pixels with an object already
-//! emitted is the same fish: the larger of the two is kept (on a tie the
-//! first), the other counted in [`SegmentStats::duplicates`]. The cut-off
-//! partial copy is always the smaller, so the whole fish survives.
+//! emitted is the same fish: the one of the lower level is kept (a fish
+//! thresholded in its own region over its dim-level copy from a
+//! neighbour's), then the larger (on a tie the first), the other counted
+//! in [`SegmentStats::duplicates`]. The cut-off partial copy is always the
+//! smaller, so the whole fish survives.
 //!
 //! **Capacity.** `Objects<N, R>` holds `N` objects and `R` mask runs. When
 //! either is full, the smallest objects go first (an incoming object smaller
@@ -168,6 +177,11 @@ pub struct SegmentStats {
     /// Final objects rejected by the elongation test
     /// ([`local::elongated_enough`]).
     pub rejected_shape: u32,
+    /// Dim-level objects dropped as parts of a larger level-0 object they
+    /// touch (`Params::dim_level`).
+    pub rejected_fragment: u32,
+    /// Regions thresholded at the dim level (`Params::dim_level`).
+    pub dim_levels: u32,
     /// Components past [`MAX_ROI_COMPONENTS`] in one region (not examined).
     pub label_overflow: u32,
     /// Extra objects made by splitting merged objects ([`split`]).
@@ -189,6 +203,8 @@ pub(crate) struct Candidate {
     pub sum: u64,
     pub sumsq: u64,
     pub hist: [u32; HIST_BINS],
+    /// Thresholding level ([`Object::level`]).
+    pub level: u8,
 }
 
 /// The final components of a region, ROI coordinates: a run table
@@ -289,6 +305,9 @@ pub struct RegionTrace {
     pub region: Region,
     /// Its bounding box.
     pub roi: Roi,
+    /// 0: the region's thresholds; 1: its second, dim level
+    /// (`Params::dim_level`), on the pixels level 0's objects leave.
+    pub level: u8,
     /// Otsu's τ on the ellipse's pixels.
     pub tau: u8,
     /// ⌊τ_low⌋ of eq. (1).
@@ -430,7 +449,9 @@ pub(crate) fn emit<const N: usize, const R: usize>(
             }
             let ov = overlap(&out.runs, o, mask) as u64;
             if 2 * ov > o.area.min(area) as u64 {
-                if o.area >= area {
+                // a lower level (a fish thresholded in its own region)
+                // wins over a higher one, then the larger object
+                if (o.level, area) <= (cand.level, o.area) {
                     stats.duplicates += 1;
                     return;
                 }
@@ -544,6 +565,7 @@ pub(crate) fn emit<const N: usize, const R: usize>(
             start: start as u32,
             len: (out.runs.len() - start) as u32,
         },
+        level: cand.level,
     };
     if out.items.push(obj).is_err() {
         out.dropped += 1;

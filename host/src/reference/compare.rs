@@ -120,10 +120,12 @@ pub fn compare_segmentation(
         let lr = 2.0 * reference.objects[j].obb.2;
         max_len = max_len.max((lc - lr).abs() / lr.max(1e-9));
     }
-    // regions: match by centre (same coarse component ⇒ same centroid)
+    // regions: match by centre (same coarse component ⇒ same centroid) and
+    // level
     let core_region = |r: &super::segment::RefRegion| -> Option<&RegionTrace> {
         traces
             .iter()
+            .filter(|t| t.level == r.level)
             .map(|t| {
                 let d = ((r.cx - t.region.cx as f64).powi(2) + (r.cy - t.region.cy as f64).powi(2))
                     .sqrt();

@@ -21,10 +21,15 @@ use super::background::Background;
 use fishtrack_core::Params;
 use image::{GrayImage, Luma};
 use imageproc::contrast::otsu_level;
+use imageproc::distance_transform::Norm;
 use imageproc::filter::median_filter;
-use imageproc::morphology::{grayscale_dilate, grayscale_erode, Mask};
+use imageproc::morphology::{dilate, grayscale_dilate, grayscale_erode, Mask};
 use imageproc::region_labelling::{connected_components, Connectivity};
 use std::collections::{HashMap, HashSet};
+
+/// Core: `local::DIM_LEVEL_SIGMAS`, `local::DIM_LEVEL_FLOOR`.
+const DIM_K: f64 = fishtrack_core::segment::local::DIM_LEVEL_SIGMAS as f64;
+const DIM_FLOOR: [f32; 2] = fishtrack_core::segment::local::DIM_LEVEL_FLOOR;
 
 /// An elliptic local region of the reference, with its thresholds.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,6 +50,9 @@ pub struct RefRegion {
     pub t_low: f64,
     /// τ_high of eq. (1), real.
     pub t_high: f64,
+    /// 0: the region's own thresholds; 1: the dim level (core:
+    /// `Params::dim_level`), the region again without level 0's objects.
+    pub level: u8,
 }
 
 /// A segmented object of the reference.
@@ -62,6 +70,8 @@ pub struct RefObject {
     pub variance: f64,
     /// Oriented box: centre x, centre y, half width, half height, angle.
     pub obb: (f64, f64, f64, f64, f64),
+    /// The level of its region that found it (`RefRegion::level`).
+    pub level: u8,
 }
 
 /// Everything the reference computed for one frame.
@@ -490,6 +500,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
             tau: None,
             t_low: 0.0,
             t_high: 0.0,
+            level: 0,
         });
         // pixels of the ellipse
         let (c, sn) = (angle.cos(), angle.sin());
@@ -515,207 +526,296 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
         // the pixels the thresholds see (core: `local_smooth`, then the
         // background subtracted for regions thinner than its opening square)
         let sub = bg.as_ref().filter(|_| 3f64.sqrt() * b / s < side);
-        let at = |i: u32| {
-            let (x, y) = (x0 + i % rw, y0 + i / rw);
-            let v = smoothed.get_pixel(x, y).0[0];
-            sub.map_or(v, |g| g.subtract(v, x, y))
-        };
-        let vals: Vec<u8> = (0..rw * rh).filter(|&i| ins[i as usize]).map(at).collect();
-        if vals.is_empty() || vals.len() < amin {
-            continue;
-        }
-        // eq. (1)
-        let tau = otsu_level(
-            &GrayImage::from_raw(vals.len() as u32, 1, vals.clone()).unwrap_or_default(),
-        );
-        let low: Vec<f64> = vals
-            .iter()
-            .filter(|&&v| v <= tau)
-            .map(|&v| v as f64)
-            .collect();
-        let mu_l = if low.is_empty() {
-            tau as f64
-        } else {
-            low.iter().sum::<f64>() / low.len() as f64
-        };
-        let (t_low, t_high) = if p.double_threshold {
-            (
-                tau as f64 - p.p_low as f64 * (tau as f64 - mu_l),
-                tau as f64 - p.p_high as f64 * (tau as f64 - mu_l),
-            )
-        } else {
-            (tau as f64, tau as f64)
-        };
-        {
-            let r = &mut res.regions[ri];
-            r.tau = Some(tau);
-            r.t_low = t_low;
-            r.t_high = t_high;
-        }
-        let mask_of = |t: f64| {
-            GrayImage::from_fn(rw, rh, |x, y| {
-                let i = y * rw + x;
-                Luma([if ins[i as usize] && at(i) as f64 > t {
-                    255
-                } else {
-                    0
-                }])
-            })
-        };
-        let restrict = |m: GrayImage| {
-            GrayImage::from_fn(rw, rh, |x, y| {
-                let i = (y * rw + x) as usize;
-                Luma([if ins[i] { m.get_pixel(x, y).0[0] } else { 0 }])
-            })
-        };
-        let m_low = restrict(median_filter(&mask_of(t_low), 1, 1));
-        let m_high = restrict(median_filter(&mask_of(t_high), 1, 1));
-        // eq. (2)–(3)
-        let bmask = if p.double_threshold && p.backprojection {
-            let bins = p.hist_bins as usize;
-            // bins spanning [⌊τ_low⌋, 99th percentile of the ellipse]
-            let mut sorted = vals.clone();
-            sorted.sort_unstable();
-            let need = (sorted.len() * 99).div_ceil(100).max(1);
-            let lo = t_low.floor().clamp(0.0, 255.0) as usize;
-            let hi = (sorted[need - 1] as usize).max(lo);
-            let bin_of =
-                |v: u8| (v as usize).clamp(lo, hi).saturating_sub(lo) * bins / (hi - lo + 1);
-            let (mut hl, mut hh) = (vec![0f64; bins], vec![0f64; bins]);
-            for i in 0..rw * rh {
-                let (x, y) = (i % rw, i / rw);
-                let bin = bin_of(at(i));
-                if m_low.get_pixel(x, y).0[0] > 0 {
-                    hl[bin] += 1.0;
+        // level 1 (core: `Params::dim_level`): the region again, its pixels
+        // within the disk's side (Chebyshev) of level 0's objects set to 0
+        // and out of its histogram
+        let levels = 1 + p.dim_level as usize;
+        let mut cleared = vec![false; (rw * rh) as usize];
+        let (mut tau_above, mut area0) = (u8::MAX, 0usize);
+        for level in 0..levels {
+            let at = |i: u32| {
+                if cleared[i as usize] {
+                    return 0;
                 }
-                if m_high.get_pixel(x, y).0[0] > 0 {
-                    hh[bin] += 1.0;
-                }
-            }
-            let ratio: Vec<f64> = hl
-                .iter()
-                .zip(&hh)
-                .map(|(&l, &hv)| if l > 0.0 { (hv / l).min(1.0) } else { 0.0 })
+                let (x, y) = (x0 + i % rw, y0 + i / rw);
+                let v = smoothed.get_pixel(x, y).0[0];
+                sub.map_or(v, |g| g.subtract(v, x, y))
+            };
+            let vals: Vec<u8> = (0..rw * rh)
+                .filter(|&i| ins[i as usize])
+                .map(at)
+                .filter(|&v| level == 0 || v > 0)
                 .collect();
-            GrayImage::from_fn(rw, rh, |x, y| {
-                let i = y * rw + x;
-                let bp = ratio[bin_of(at(i))];
-                Luma([if ins[i as usize] && bp > p.theta_bp as f64 {
-                    255
-                } else {
-                    0
-                }])
-            })
-        } else {
-            m_high
-        };
-        // eq. (4)–(6)
-        let roi_img = GrayImage::from_fn(rw, rh, |x, y| *filtered.get_pixel(x0 + x, y0 + y));
-        let seen = GrayImage::from_fn(rw, rh, |x, y| Luma([at(y * rw + x)]));
-        // the water (Otsu's lower class): lower median and 1.4826 · MAD
-        // (core: `local::water_level`)
-        let mut water: Vec<u32> = vals
-            .iter()
-            .filter(|&&v| v <= tau)
-            .map(|&v| v as u32)
-            .collect();
-        let (w_med, w_sigma) = if water.is_empty() {
-            (tau as f64, 1.0)
-        } else {
-            let med = lower_median(&mut water);
-            let mut dev: Vec<u32> = water.iter().map(|&v| v.abs_diff(med)).collect();
-            (
-                med as f64,
-                (1.4826 * lower_median(&mut dev) as f64).max(1.0),
-            )
-        };
-        let mut kept = GrayImage::new(rw, rh);
-        for comp in components(&bmask) {
-            if comp.len() < amin || comp.len() > amax {
-                continue;
+            if vals.is_empty() || vals.len() < amin {
+                break;
             }
-            let (_, var) = mean_var(&roi_img, &comp);
-            let (seen_mean, _) = mean_var(&seen, &comp);
-            let contrast_ok = p.contrast_sigmas > 0.0
-                && seen_mean - w_med
-                    >= p.contrast_sigmas as f64 * w_sigma.max(p.noise_floor as f64);
-            if p.variance_rejection && var < var_limit && !contrast_ok {
-                continue;
+            // eq. (1)
+            let tau = otsu_level(
+                &GrayImage::from_raw(vals.len() as u32, 1, vals.clone()).unwrap_or_default(),
+            );
+            if level > 0 && tau >= tau_above {
+                break; // the remainder splits no lower than level 0 did
             }
-            for &(x, y) in &comp {
-                kept.put_pixel(x, y, Luma([255]));
+            tau_above = tau;
+            let low: Vec<f64> = vals
+                .iter()
+                .filter(|&&v| v <= tau)
+                .map(|&v| v as f64)
+                .collect();
+            let mu_l = if low.is_empty() {
+                tau as f64
+            } else {
+                low.iter().sum::<f64>() / low.len() as f64
+            };
+            let (t_low, t_high) = if p.double_threshold {
+                (
+                    tau as f64 - p.p_low as f64 * (tau as f64 - mu_l),
+                    tau as f64 - p.p_high as f64 * (tau as f64 - mu_l),
+                )
+            } else {
+                (tau as f64, tau as f64)
+            };
+            // the water (Otsu's lower class): lower median and 1.4826 · MAD
+            // (core: `local::water_level`)
+            let mut water: Vec<u32> = vals
+                .iter()
+                .filter(|&&v| v <= tau)
+                .map(|&v| v as u32)
+                .collect();
+            let (w_med, w_sigma) = if water.is_empty() {
+                (tau as f64, 1.0)
+            } else {
+                let med = lower_median(&mut water);
+                let mut dev: Vec<u32> = water.iter().map(|&v| v.abs_diff(med)).collect();
+                (
+                    med as f64,
+                    (1.4826 * lower_median(&mut dev) as f64).max(1.0),
+                )
+            };
+            let s_w = w_sigma.max(p.noise_floor as f64);
+            let ri = if level == 0 {
+                ri
+            } else {
+                // a dim fish must stand out of the water as the contrast test
+                // asks, over half an object's area; the thresholds stay
+                // DIM_LEVEL_FLOOR water σ above it
+                let bright = vals
+                    .iter()
+                    .filter(|&&v| v as f64 >= w_med + DIM_K * s_w)
+                    .count();
+                if 2 * bright < amin {
+                    break;
+                }
+                res.regions.push(RefRegion {
+                    level: level as u8,
+                    ..res.regions[ri].clone()
+                });
+                res.regions.len() - 1
+            };
+            let (t_low, t_high) = if level == 0 {
+                (t_low, t_high)
+            } else {
+                let fl = |k: f32| (w_med + k as f64 * s_w).min(255.0).floor();
+                (t_low.max(fl(DIM_FLOOR[0])), t_high.max(fl(DIM_FLOOR[1])))
+            };
+            {
+                let r = &mut res.regions[ri];
+                r.tau = Some(tau);
+                r.t_low = t_low;
+                r.t_high = t_high;
             }
-        }
-        // Section III.D
-        let post = open(&close(&kept, &disk), &disk);
-        let comps: Vec<Vec<(u32, u32)>> = components(&post)
-            .into_iter()
-            .filter(|c| c.len() >= amin && c.len() <= amax)
-            .collect();
-        // split of merged objects (core: `segment::split`): each object's
-        // first part keeps its place, further parts follow all objects
-        let comps = if p.split_merged {
-            let t_fl = t_low.floor().clamp(0.0, 255.0) as u8;
-            let m = p.margin / 4;
-            let cut = |c: &[(u32, u32)]| {
-                c.iter().any(|&(x, y)| {
-                    let (fx, fy) = (x + x0, y + y0);
-                    fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
+            let mask_of = |t: f64| {
+                GrayImage::from_fn(rw, rh, |x, y| {
+                    let i = y * rw + x;
+                    Luma([if ins[i as usize] && at(i) as f64 > t {
+                        255
+                    } else {
+                        0
+                    }])
                 })
             };
-            let split: Vec<_> = comps
-                .iter()
-                .map(|c| super::split::split_object(c, &seen, t_fl, p, cut))
-                .collect();
-            let mut firsts: Vec<_> = split.iter().map(|s| s[0].clone()).collect();
-            firsts.extend(split.into_iter().flat_map(|s| s.into_iter().skip(1)));
-            firsts
-        } else {
-            comps
-        };
-        for comp in comps {
-            // elongation test (core: `local::elongated_enough`)
-            let e = p.min_elongation as f64;
-            let (_, _, _, l1, l2) = pca(&comp);
-            // (core: `local::cut_by_border` exempts fish cut by the frame)
-            let m = p.margin / 4;
-            let cut = comp.iter().any(|&(x, y)| {
-                let (fx, fy) = (x + x0, y + y0);
-                fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
-            });
-            if e > 1.0 && l1 < e * e * l2 && !cut {
-                continue;
-            }
-            let (mean, variance) = mean_var(&roi_img, &comp);
-            let frame_px: Vec<(u32, u32)> = comp.iter().map(|&(x, y)| (x + x0, y + y0)).collect();
-            let bbox = (
-                frame_px.iter().map(|p| p.0).min().unwrap_or(0),
-                frame_px.iter().map(|p| p.1).min().unwrap_or(0),
-                frame_px.iter().map(|p| p.0).max().unwrap_or(0),
-                frame_px.iter().map(|p| p.1).max().unwrap_or(0),
-            );
-            let obj = RefObject {
-                obb: oriented_box(&frame_px),
-                pixels: frame_px.into_iter().collect(),
-                region: ri,
-                bbox,
-                mean,
-                variance,
+            let restrict = |m: GrayImage| {
+                GrayImage::from_fn(rw, rh, |x, y| {
+                    let i = (y * rw + x) as usize;
+                    Luma([if ins[i] { m.get_pixel(x, y).0[0] } else { 0 }])
+                })
             };
-            add_dedup(&mut res.objects, obj);
+            let m_low = restrict(median_filter(&mask_of(t_low), 1, 1));
+            let m_high = restrict(median_filter(&mask_of(t_high), 1, 1));
+            // eq. (2)–(3)
+            let bmask = if p.double_threshold && p.backprojection {
+                let bins = p.hist_bins as usize;
+                // bins spanning [⌊τ_low⌋, 99th percentile of the ellipse]
+                let mut sorted = vals.clone();
+                sorted.sort_unstable();
+                let need = (sorted.len() * 99).div_ceil(100).max(1);
+                let lo = t_low.floor().clamp(0.0, 255.0) as usize;
+                let hi = (sorted[need - 1] as usize).max(lo);
+                let bin_of =
+                    |v: u8| (v as usize).clamp(lo, hi).saturating_sub(lo) * bins / (hi - lo + 1);
+                let (mut hl, mut hh) = (vec![0f64; bins], vec![0f64; bins]);
+                for i in 0..rw * rh {
+                    let (x, y) = (i % rw, i / rw);
+                    let bin = bin_of(at(i));
+                    if m_low.get_pixel(x, y).0[0] > 0 {
+                        hl[bin] += 1.0;
+                    }
+                    if m_high.get_pixel(x, y).0[0] > 0 {
+                        hh[bin] += 1.0;
+                    }
+                }
+                let ratio: Vec<f64> = hl
+                    .iter()
+                    .zip(&hh)
+                    .map(|(&l, &hv)| if l > 0.0 { (hv / l).min(1.0) } else { 0.0 })
+                    .collect();
+                GrayImage::from_fn(rw, rh, |x, y| {
+                    let i = y * rw + x;
+                    let bp = ratio[bin_of(at(i))];
+                    Luma([if ins[i as usize] && bp > p.theta_bp as f64 {
+                        255
+                    } else {
+                        0
+                    }])
+                })
+            } else {
+                m_high
+            };
+            // eq. (4)–(6)
+            let roi_img = GrayImage::from_fn(rw, rh, |x, y| *filtered.get_pixel(x0 + x, y0 + y));
+            let seen = GrayImage::from_fn(rw, rh, |x, y| Luma([at(y * rw + x)]));
+            let mut kept = GrayImage::new(rw, rh);
+            for comp in components(&bmask) {
+                if comp.len() < amin || comp.len() > amax {
+                    continue;
+                }
+                let (_, var) = mean_var(&roi_img, &comp);
+                let (seen_mean, _) = mean_var(&seen, &comp);
+                let k = if level == 0 {
+                    p.contrast_sigmas as f64
+                } else {
+                    DIM_K
+                };
+                let stands_out = seen_mean - w_med >= k * s_w;
+                if level > 0 {
+                    // the dim level's objects must stand out from its water
+                    if !stands_out {
+                        continue;
+                    }
+                } else if p.variance_rejection
+                    && var < var_limit
+                    && !(p.contrast_sigmas > 0.0 && stands_out)
+                {
+                    continue;
+                }
+                for &(x, y) in &comp {
+                    kept.put_pixel(x, y, Luma([255]));
+                }
+            }
+            // Section III.D
+            let post = open(&close(&kept, &disk), &disk);
+            let comps: Vec<Vec<(u32, u32)>> = components(&post)
+                .into_iter()
+                .filter(|c| c.len() >= amin && c.len() <= amax)
+                .collect();
+            // split of merged objects (core: `segment::split`): each object's
+            // first part keeps its place, further parts follow all objects
+            let comps = if p.split_merged {
+                let t_fl = t_low.floor().clamp(0.0, 255.0) as u8;
+                let m = p.margin / 4;
+                let cut = |c: &[(u32, u32)]| {
+                    c.iter().any(|&(x, y)| {
+                        let (fx, fy) = (x + x0, y + y0);
+                        fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
+                    })
+                };
+                let split: Vec<_> = comps
+                    .iter()
+                    .map(|c| super::split::split_object(c, &seen, t_fl, p, cut))
+                    .collect();
+                let mut firsts: Vec<_> = split.iter().map(|s| s[0].clone()).collect();
+                firsts.extend(split.into_iter().flat_map(|s| s.into_iter().skip(1)));
+                firsts
+            } else {
+                comps
+            };
+            let comps_all = comps;
+            // a component of the level-1 mask or an 8-neighbour at 0: next to
+            // what level 0 cleared (core: the fragment rule of `segment_region`)
+            let touches_cleared = |c: &[(u32, u32)]| {
+                c.iter().any(|&(x, y)| {
+                    (y.saturating_sub(1)..(y + 2).min(rh)).any(|yy| {
+                        (x.saturating_sub(1)..(x + 2).min(rw)).any(|xx| at(yy * rw + xx) == 0)
+                    })
+                })
+            };
+            for comp in comps_all.iter() {
+                // elongation test (core: `local::elongated_enough`)
+                let e = p.min_elongation as f64;
+                let (_, _, _, l1, l2) = pca(comp);
+                // (core: `local::cut_by_border` exempts fish cut by the frame)
+                let m = p.margin / 4;
+                let cut = comp.iter().any(|&(x, y)| {
+                    let (fx, fy) = (x + x0, y + y0);
+                    fx <= m || fy <= m || fx + m + 1 >= w || fy + m + 1 >= h
+                });
+                if e > 1.0 && l1 < e * e * l2 && !cut {
+                    continue;
+                }
+                if level == 0 {
+                    area0 = area0.max(comp.len());
+                } else if 2 * comp.len() < area0 && touches_cleared(comp) {
+                    // a dim part of a level-0 fish (its tail, a fin), not a fish
+                    continue;
+                }
+                let (mean, variance) = mean_var(&roi_img, comp);
+                let frame_px: Vec<(u32, u32)> =
+                    comp.iter().map(|&(x, y)| (x + x0, y + y0)).collect();
+                let bbox = (
+                    frame_px.iter().map(|p| p.0).min().unwrap_or(0),
+                    frame_px.iter().map(|p| p.1).min().unwrap_or(0),
+                    frame_px.iter().map(|p| p.0).max().unwrap_or(0),
+                    frame_px.iter().map(|p| p.1).max().unwrap_or(0),
+                );
+                let obj = RefObject {
+                    obb: oriented_box(&frame_px),
+                    pixels: frame_px.into_iter().collect(),
+                    region: ri,
+                    bbox,
+                    mean,
+                    variance,
+                    level: level as u8,
+                };
+                add_dedup(&mut res.objects, obj);
+            }
+            if comps_all.is_empty() {
+                break; // nothing to clear: level 1 would be level 0 again
+            }
+            if level + 1 < levels {
+                let mut grown = GrayImage::new(rw, rh);
+                for &(x, y) in comps_all.iter().flatten() {
+                    grown.put_pixel(x, y, Luma([255]));
+                }
+                let grown = dilate(&grown, Norm::LInf, p.disk_size);
+                for (c, q) in cleared.iter_mut().zip(grown.pixels()) {
+                    *c |= q.0[0] > 0;
+                }
+            }
         }
     }
     res
 }
 
 /// One fish, one object: an object sharing more than half of the smaller
-/// mask with another is the same fish; the larger is kept (first on a tie).
+/// mask with another is the same fish; the lower level is kept, then the
+/// larger (first on a tie).
 fn add_dedup(objs: &mut Vec<RefObject>, o: RefObject) {
     let mut i = 0;
     while i < objs.len() {
         let ov = objs[i].pixels.intersection(&o.pixels).count();
         if 2 * ov > objs[i].pixels.len().min(o.pixels.len()) {
-            if objs[i].pixels.len() >= o.pixels.len() {
+            // a lower level wins, then the larger
+            if (objs[i].level, o.pixels.len()) <= (o.level, objs[i].pixels.len()) {
                 return;
             }
             objs.swap_remove(i);

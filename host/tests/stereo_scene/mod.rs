@@ -353,6 +353,7 @@ pub fn push_object(objs: &mut Objs, img: &[u8], mask: &[bool], w: usize, h: usiz
             start,
             len: objs.runs.len() as u32 - start,
         },
+        level: 0,
     };
     objs.items.push(o).unwrap();
 }
