@@ -515,6 +515,7 @@ fn write_outputs(
                 range_mm,
                 ..
             } => {
+                log::debug!("track {track} closed ({reason:?}): frames {first_frame}–{last_frame}, {frames} observed");
                 if reason == CloseReason::Duplicate {
                     duplicates.insert(track);
                     continue;

@@ -91,6 +91,11 @@
 //! vicinity gate (`lost_gate`) of a target lost this frame is not a new
 //! target either: it is that target's partly hidden or cut view (our
 //! addition; it had been born as a one-frame duplicate of the fish). The
+//! same holds for an observation cut by the frame border near the
+//! prediction of a target that exits this frame: the fish's head has left
+//! and its tail end, of other grey levels and too short to match, is still
+//! in view (our addition; an uncut observation there is a fish entering and
+//! is born; end to end, seeds 9–12: count error +12.3 → +4.4 %). The
 //! birth and death rules are the same for all three association methods.
 //!
 //! A newborn target has no velocity: its first transition is projected with
@@ -772,7 +777,6 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         }
         self.viterbi = params.tracker == Association::Viterbi;
         self.resolve_closes(self.viterbi, sink);
-        self.targets.retain(|t| t.closing.is_none());
         self.births(frame, params, first_frame, ctx.sig.v);
         Ok(())
     }
@@ -1166,25 +1170,33 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
     }
 
     /// New targets from unassociated observations (see the module docs).
+    /// Targets closed this step are removed first; an observation near the
+    /// prediction of one that closed lost (it exits, or dies) is its cut or
+    /// hidden view as well, not a new fish.
     fn births(&mut self, frame: u32, params: &Params, first_frame: bool, sv2: f32) {
         let (vl, m) = (self.cfg.views()[0], params.margin);
         let cut_aware = self.cfg.cut_aware_motion;
         let big = self.cfg.birth_area_factor * params.area_min as f32;
+        let gate = self.cfg.lost_gate;
+        for c in self.cands.iter() {
+            let Some(tk) = self.taken.get_mut(c.obs as usize) else {
+                continue;
+            };
+            // Near a lost target's prediction: its partly hidden view.
+            *tk |= self.targets.iter().any(|t| {
+                (t.closing.is_none() || (t.closing == Some(CloseReason::Exit) && c.left.cut))
+                    && t.trellis
+                        .best_front()
+                        .and_then(|b| t.trellis.front.get(b))
+                        .is_some_and(|s| {
+                            let [dx, dy] = motion_delta(&s.left, &c.left, cut_aware);
+                            s.lost > 0 && (dx * dx + dy * dy) / sv2 < gate
+                        })
+            });
+        }
+        self.targets.retain(|t| t.closing.is_none());
         for c in self.cands.iter() {
             if self.taken.get(c.obs as usize).copied().unwrap_or(true) {
-                continue;
-            }
-            // Near a lost target's prediction: its partly hidden view.
-            let near_lost = self.targets.iter().any(|t| {
-                t.trellis
-                    .best_front()
-                    .and_then(|b| t.trellis.front.get(b))
-                    .is_some_and(|s| {
-                        let [dx, dy] = motion_delta(&s.left, &c.left, cut_aware);
-                        s.lost > 0 && (dx * dx + dy * dy) / sv2 < self.cfg.lost_gate
-                    })
-            });
-            if near_lost {
                 continue;
             }
             let near_border = m > 0 && near_edge(&c.bbox, &vl, m - 1);

@@ -609,3 +609,48 @@ fn a_box_that_misses_its_centroid_counts_as_uncut() {
     assert_eq!(id.len(), 1, "{:?}", log.frames);
     assert_eq!(log.ids_of(1, 1), id, "{:?}", log.frames);
 }
+
+#[test]
+fn a_fish_leaving_cut_by_the_border_is_not_a_new_fish() {
+    // A 400-px fish swims out through the left border at 500 px/frame: its
+    // prediction for frame 3 (x = 60) is inside the exit margin, so its
+    // track closes there (Exit). In frame 3 only its tail end is in view,
+    // cut by the border and of other grey levels (the head has left), so
+    // the track does not take it. That cut view at the exiting track's
+    // prediction is the same fish leaving — no new target; a short fish
+    // wholly in view at the same place is a new one.
+    for cut in [true, false] {
+        let mut frames = Vec::new();
+        for t in 0..3 {
+            frames.push(std::vec![fish(
+                1560.0 - 500.0 * t as f32,
+                1000.0,
+                400.0,
+                9,
+                1800.0,
+                0
+            )]);
+        }
+        let len = if cut { 400.0 } else { 100.0 };
+        frames.push(std::vec![fish(60.0, 1000.0, len, 1, 1800.0, 0)]);
+        frames.push(Vec::new());
+        let (log, _) = run(&frames, Assoc::Viterbi);
+        let fish_id = log.ids_of(0, 0);
+        assert_eq!(fish_id.len(), 1, "{:?}", log.frames);
+        assert_eq!(log.ids_of(2, 0), fish_id, "{:?}", log.frames);
+        let exit = log.closed.iter().find(|c| c.0 == fish_id[0]).map(|c| c.1);
+        assert_eq!(exit, Some(CloseReason::Exit), "{:?}", log.closed);
+        let later = log.ids_of(3, 0);
+        assert!(!later.contains(&fish_id[0]), "{:?}", log.frames);
+        if cut {
+            assert!(
+                later.is_empty(),
+                "the leaving tail was born: {:?}",
+                log.frames
+            );
+            assert_eq!(log.closed.len(), 1, "{:?}", log.closed);
+        } else {
+            assert_eq!(later.len(), 1, "{:?}", log.frames);
+        }
+    }
+}

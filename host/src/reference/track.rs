@@ -214,6 +214,8 @@ struct Target {
     dup: bool,
     /// Close decided this frame, carried out after every target stepped.
     pending: bool,
+    /// That close is an exit (lost with its prediction at the border).
+    exit: bool,
     /// Committed path: (frame, observation).
     path: Vec<(u32, Option<usize>)>,
 }
@@ -733,6 +735,7 @@ pub fn run(
                 let (vx0, vy0, vx1, vy1) = (vx0 as f64, vy0 as f64, vx1 as f64, vy1 as f64);
                 if !(q[0] >= vx0 + m && q[0] < vx1 - m && q[1] >= vy0 + m && q[1] < vy1 - m) {
                     t.pending = true;
+                    t.exit = true;
                 }
             }
             if new_best_lost && best.lost > cfg.max_lost as u32 {
@@ -778,31 +781,36 @@ pub fn run(
         }
         let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
         resolve_closes(&mut targets, fold, &mut recent, &mut out);
-        targets.retain(|t| !t.closed);
 
         // Births.
         let big = cfg.birth_area_factor as f64 * p.area_min as f64;
         let mu = p.margin;
-        for c in &cands {
-            if taken[c.obs] {
-                continue;
-            }
-            // Near the prediction of a target lost this frame: its partly
-            // hidden view, not a new fish.
-            let near_lost = targets.iter().any(|t| {
-                let b = (0..t.front.len()).fold(0, |b, i| {
-                    if t.front[i].cost < t.front[b].cost {
-                        i
-                    } else {
-                        b
-                    }
-                });
-                t.front.get(b).is_some_and(|s| {
-                    let [dx, dy] = displacement(&s.left, &c.left, k.cut_aware);
-                    s.lost > 0 && (dx * dx + dy * dy) / k.s[0] < cfg.lost_gate as f64
+        // Near the prediction of a target lost this frame: its partly
+        // hidden view, not a new fish; near that of a target exiting now
+        // (not folded as a duplicate), a view the border cuts is its
+        // cut view.
+        let near_lost: Vec<bool> = cands
+            .iter()
+            .map(|c| {
+                let live_or_exit = |t: &&Target| !t.closed || (t.exit && !t.dup && c.left.cut);
+                targets.iter().filter(live_or_exit).any(|t| {
+                    let b = (0..t.front.len()).fold(0, |b, i| {
+                        if t.front[i].cost < t.front[b].cost {
+                            i
+                        } else {
+                            b
+                        }
+                    });
+                    t.front.get(b).is_some_and(|s| {
+                        let [dx, dy] = displacement(&s.left, &c.left, k.cut_aware);
+                        s.lost > 0 && (dx * dx + dy * dy) / k.s[0] < cfg.lost_gate as f64
+                    })
                 })
-            });
-            if near_lost {
+            })
+            .collect();
+        targets.retain(|t| !t.closed);
+        for (c, &near_lost) in cands.iter().zip(&near_lost) {
+            if taken[c.obs] || near_lost {
                 continue;
             }
             let (x0, y0, x1, y1) = c.bbox;
@@ -838,6 +846,7 @@ pub fn run(
                 closed: false,
                 dup: false,
                 pending: false,
+                exit: false,
                 path: Vec::new(),
             });
             next_id += 1;
