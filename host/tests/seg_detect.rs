@@ -16,21 +16,27 @@ use fishtrack::eval::evaluate;
 use fishtrack::synth::{write_haul, SynthConfig};
 use fishtrack_core::params::Params;
 
+/// Writes the 768² 12-frame synthetic haul of `seed` under `dir`.
+fn small_haul(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
+    let haul = dir.join(format!("haul{seed}"));
+    let cfg = SynthConfig {
+        frames: 12,
+        seed,
+        size: 768,
+        ..SynthConfig::default()
+    };
+    write_haul(&haul, &cfg).unwrap();
+    haul
+}
+
 #[test]
 fn segmentation_precision_recall_and_length_on_small_haul() {
     let dir = tempfile::tempdir().unwrap();
     let (mut tp, mut fp, mut fn_) = (0u64, 0u64, 0u64);
     let (mut ape, mut measured) = (0.0f64, 0u64);
     for seed in 1..=3u64 {
-        let haul = dir.path().join(format!("haul{seed}"));
+        let haul = small_haul(dir.path(), seed);
         let out = dir.path().join(format!("out{seed}"));
-        let cfg = SynthConfig {
-            frames: 12,
-            seed,
-            size: 768,
-            ..SynthConfig::default()
-        };
-        write_haul(&haul, &cfg).unwrap();
         let params = Params::for_frame(768);
         let sum = detect_haul(&haul, &params, &out).unwrap();
         assert_eq!(sum.frames, 12);
@@ -71,14 +77,7 @@ fn dim_level_adds_fish_not_false_alarms() {
     let dir = tempfile::tempdir().unwrap();
     let mut tot = [[0u64; 3]; 2]; // [off, on] × [tp, fp, fn]
     for seed in 1..=8u64 {
-        let haul = dir.path().join(format!("haul{seed}"));
-        let cfg = SynthConfig {
-            frames: 12,
-            seed,
-            size: 768,
-            ..SynthConfig::default()
-        };
-        write_haul(&haul, &cfg).unwrap();
+        let haul = small_haul(dir.path(), seed);
         for (k, on) in [false, true].into_iter().enumerate() {
             let out = dir.path().join(format!("out{seed}_{on}"));
             let mut params = Params::for_frame(768);
