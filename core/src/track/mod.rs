@@ -1170,16 +1170,16 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
     }
 
     /// New targets from unassociated observations (see the module docs).
-    /// Targets closed this step are removed first; an observation near the
-    /// prediction of one that closed lost (it exits, or dies) is its cut or
-    /// hidden view as well, not a new fish.
+    /// Observations near a lost target's prediction are marked taken first,
+    /// including cut views near a target exiting this step; then the
+    /// targets closed this step are removed.
     fn births(&mut self, frame: u32, params: &Params, first_frame: bool, sv2: f32) {
         let (vl, m) = (self.cfg.views()[0], params.margin);
         let cut_aware = self.cfg.cut_aware_motion;
         let big = self.cfg.birth_area_factor * params.area_min as f32;
         let gate = self.cfg.lost_gate;
         for c in self.cands.iter() {
-            let Some(tk) = self.taken.get_mut(c.obs as usize) else {
+            let Some(tk) = self.taken.get_mut(c.obs as usize).filter(|tk| !**tk) else {
                 continue;
             };
             // Near a lost target's prediction: its partly hidden view.
