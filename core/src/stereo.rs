@@ -26,10 +26,20 @@
 //! - The coarse disparity `d_o` is the candidate (the 4 block disparities and
 //!   the two box-edge alignments) with the least whole-box SAD per pixel, so a
 //!   box cut by the frame border or cropped at one end still gets the
-//!   disparity of its visible part.
+//!   disparity of its visible part. By default (session 16,
+//!   [`PairingLimits::zero_mean_d_o`]) that whole-box SAD is *zero-mean*
+//!   ([`zsad_per_pixel`]): the two cameras record the water at different
+//!   levels (their own strobes and vignetting; on the synthetic hauls up to
+//!   40 grey levels apart), and a box that is mostly water — a fish entering
+//!   across the border, whose head alone is in the left view — then
+//!   matched the other view's brighter water better than its own head at
+//!   the plain SAD: seed 5, frame 14, depth 1978 mm for a fish at 2908 mm,
+//!   and the depth cue of the tracker then split the fish's track. It is
+//!   evaluated only for the pairs the assignment chooses
+//!   ([`CoarseCost::Deferred`]), as pairing itself needs only `μ_SAD`.
 //!
-//! Cost: a candidate costs `16 · (w/4) · h = 4·w·h` absolute differences plus
-//! ≤ 6 whole-box evaluations for `d_o`; [`PairingStats::sad_ops`] counts them,
+//! Cost: a candidate costs `16 · (w/4) · h = 4·w·h` absolute differences;
+//! a chosen pair adds ≤ 6 whole-box evaluations for `d_o`; [`PairingStats::sad_ops`] counts them,
 //! [`dense_sad_ops`] gives the dense block-matching figure to compare with.
 //! Memory bound: the cost matrix `N² · 4` bytes and `O(N)` work arrays on the
 //! stack (the chosen pairs' block matches are recomputed, not stored); no heap.
@@ -66,6 +76,14 @@ pub struct PairingLimits {
     pub min_size_ratio: f32,
     /// Largest acceptable `μ_SAD`, grey levels per pixel.
     pub max_sad_per_pixel: f32,
+    /// Choose `d_o` among its candidates by the *zero-mean* whole-box SAD
+    /// ([`zsad_per_pixel`]; beyond the paper): the two cameras see the
+    /// water and the fish at different levels (their own strobes and
+    /// vignetting), and a box that is mostly water — a fish cut by the
+    /// frame border, a thin or dim fish — then matches the other view's
+    /// brighter water better than the fish itself at the plain SAD. False:
+    /// the plain SAD, as the blocks.
+    pub zero_mean_d_o: bool,
 }
 
 impl Default for PairingLimits {
@@ -77,6 +95,7 @@ impl Default for PairingLimits {
             min_row_overlap: 0.6,
             min_size_ratio: 0.5,
             max_sad_per_pixel: 40.0,
+            zero_mean_d_o: true,
         }
     }
 }
@@ -202,6 +221,71 @@ fn sad_sum(
     (sum, n, total)
 }
 
+/// Zero-mean SAD per pixel between left pixels `[x0, x1) × [y0, y1)` and
+/// the right image shifted by `−d`, over the same pixels as [`sad_sum`]:
+/// `Σ |(a − b) − (ā − b̄)| / n`, the two windows' means taken out (the
+/// zero-mean SAD of stereo matching under unequal illumination). Integer
+/// arithmetic: `Σ |n(a − b) − (Σa − Σb)|` over `n²`, exact for any box
+/// up to 65535² (n < 2³², each term ≤ 2⁴¹, summed in `u128`). `None` when fewer than
+/// half of the pixels could be compared. One pass over the pixels (a
+/// histogram of the differences); also returns the differences computed.
+pub fn zsad_per_pixel(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+    d: i32,
+) -> (Option<f32>, u64) {
+    let w = right.width() as i64;
+    let x1 = x1.min(left.width() as u32);
+    let y1 = y1.min(left.height() as u32).min(right.height() as u32);
+    if x1 <= x0 || y1 <= y0 {
+        return (None, 0);
+    }
+    let lo = (x0 as i64).max(d as i64);
+    let hi = (x1 as i64).min(w + d as i64);
+    let total = (x1 - x0) as u64 * (y1 - y0) as u64;
+    if hi <= lo {
+        return (None, 0);
+    }
+    let (lo, hi) = (lo as usize, hi as usize);
+    let (rlo, rhi) = (
+        (lo as i64 - d as i64) as usize,
+        (hi as i64 - d as i64) as usize,
+    );
+    // one pass: the histogram of the differences a − b (511 bins, offset
+    // 255); the sums and the zero-mean SAD follow from it exactly
+    let mut hist = [0u32; 511];
+    let mut n = 0u64;
+    for y in y0 as usize..y1 as usize {
+        let (Some(a), Some(b)) = (left.row(y).get(lo..hi), right.row(y).get(rlo..rhi)) else {
+            continue;
+        };
+        for (&p, &q) in a.iter().zip(b) {
+            if let Some(c) = hist.get_mut((p as usize + 255) - q as usize) {
+                *c += 1;
+            }
+        }
+        n += a.len() as u64;
+    }
+    if n == 0 || 2 * n < total {
+        return (None, n);
+    }
+    let ni = n as i64;
+    let m: i64 = hist.iter().zip(-255i64..).map(|(&c, v)| c as i64 * v).sum();
+    // |n·v − m| ≤ 2⁴¹ and a count ≤ 2³²: each term and the sum fit u128
+    let acc: u128 = hist
+        .iter()
+        .zip(-255i64..)
+        .filter(|(&c, _)| c > 0)
+        .map(|(&c, v)| c as u128 * (ni * v - m).unsigned_abs() as u128)
+        .sum();
+    let nf = n as f64;
+    (Some((acc as f64 / (nf * nf)) as f32), n)
+}
+
 /// `Σ |a[i] − b[i]|` over the common length: 32-byte chunks summed in u16
 /// lanes (at most 32 × 255 each, no overflow), which vectorises to packed
 /// absolute differences, then the tail.
@@ -305,9 +389,25 @@ fn shapes_compatible(lb: &Roi, rb: &Roi, w: u32, h: u32, lim: &PairingLimits) ->
     true
 }
 
+/// How [`match_boxes`] chooses the coarse disparity `d_o` among its
+/// candidates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CoarseCost {
+    /// Least whole-box SAD (the blocks' own measure).
+    Plain,
+    /// Least zero-mean whole-box SAD ([`PairingLimits::zero_mean_d_o`]).
+    ZeroMean,
+    /// Not chosen: `d_o` is the blocks' mean disparity, to be replaced by
+    /// [`zero_mean_d_o`] once the pair is chosen (pairing itself needs only
+    /// `μ_SAD`, so only the chosen pairs pay for the whole-box passes).
+    Deferred,
+}
+
 /// Object-height block matching of one left box against one right box
 /// (Section IV.A) over their shared rows; `None` when no block pair lies in
-/// the allowed disparity interval `[d_lo, d_hi]`.
+/// the allowed disparity interval `[d_lo, d_hi]`. `cost` says how `d_o`
+/// is chosen among its candidates.
+#[allow(clippy::too_many_arguments)]
 pub fn match_boxes(
     left: &ImageView<'_>,
     right: &ImageView<'_>,
@@ -315,6 +415,7 @@ pub fn match_boxes(
     rb: Roi,
     d_lo: f32,
     d_hi: f32,
+    cost: CoarseCost,
     ops: &mut u64,
 ) -> Option<BlockMatch> {
     let y0 = lb.y.max(rb.y);
@@ -377,14 +478,7 @@ pub fn match_boxes(
         }
     }
     // coarse disparity: the candidate with the least whole-box SAD
-    let cands = [
-        disp[0],
-        disp[1],
-        disp[2],
-        disp[3],
-        lb.x as f32 - rb.x as f32,
-        lb.right() as f32 - rb.right() as f32,
-    ];
+    let cands = d_o_candidates(&lb, &rb, &disp);
     // whole-box SAD at disparity `d`: the blocks' memoised sums, the
     // missing ones computed (each distinct `d` once)
     let mut whole = |d: i32| -> Option<f32> {
@@ -412,9 +506,49 @@ pub fn match_boxes(
         };
         per_pixel((acc.0, acc.1, total))
     };
-    let mut seen: [Option<(i32, Option<f32>)>; 6] = [None; 6];
-    let mut best = (f32::INFINITY, dmean);
-    for (c, seen_slot) in cands.into_iter().zip(0..) {
+    let d_o = match cost {
+        CoarseCost::Plain => choose_d_o(&cands, d_lo, d_hi, dmean, &mut whole),
+        CoarseCost::ZeroMean => choose_d_o(&cands, d_lo, d_hi, dmean, &mut |d| {
+            let (s, n) = zsad_per_pixel(left, right, lb.x, lb.right(), y0, y1, d);
+            *ops += n;
+            s
+        }),
+        CoarseCost::Deferred => dmean,
+    };
+    Some(BlockMatch {
+        mu_sad: sum / n as f32,
+        block_disparity: disp,
+        d_o,
+    })
+}
+
+/// The `d_o` candidates of a match (Section IV.A, beyond the paper's
+/// single block disparity): the 4 block disparities and the two box-edge
+/// alignments.
+fn d_o_candidates(lb: &Roi, rb: &Roi, disp: &[f32; BLOCKS]) -> [f32; BLOCKS + 2] {
+    [
+        disp[0],
+        disp[1],
+        disp[2],
+        disp[3],
+        lb.x as f32 - rb.x as f32,
+        lb.right() as f32 - rb.right() as f32,
+    ]
+}
+
+/// The candidate in `[d_lo, d_hi]` with the least whole-box cost
+/// `whole(d)` (each distinct shift evaluated once; the first on ties);
+/// `fallback` when none has a cost.
+fn choose_d_o(
+    cands: &[f32; BLOCKS + 2],
+    d_lo: f32,
+    d_hi: f32,
+    fallback: f32,
+    whole: &mut dyn FnMut(i32) -> Option<f32>,
+) -> f32 {
+    let mut seen: [Option<(i32, Option<f32>)>; BLOCKS + 2] = [None; BLOCKS + 2];
+    let mut best = (f32::INFINITY, fallback);
+    for (&c, seen_slot) in cands.iter().zip(0..) {
         if c < d_lo || c > d_hi {
             continue;
         }
@@ -435,10 +569,30 @@ pub fn match_boxes(
             }
         }
     }
-    Some(BlockMatch {
-        mu_sad: sum / n as f32,
-        block_disparity: disp,
-        d_o: best.1,
+    best.1
+}
+
+/// The zero-mean `d_o` of a match whose `d_o` was deferred
+/// ([`CoarseCost::Deferred`]): [`match_boxes`] with
+/// [`CoarseCost::ZeroMean`] gives the same, for the cost of the whole-box
+/// evaluations alone.
+#[allow(clippy::too_many_arguments)]
+pub fn zero_mean_d_o(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    lb: Roi,
+    rb: Roi,
+    m: &BlockMatch,
+    d_lo: f32,
+    d_hi: f32,
+    ops: &mut u64,
+) -> f32 {
+    let (y0, y1) = (lb.y.max(rb.y), lb.bottom().min(rb.bottom()));
+    let cands = d_o_candidates(&lb, &rb, &m.block_disparity);
+    choose_d_o(&cands, d_lo, d_hi, m.d_o, &mut |d| {
+        let (s, n) = zsad_per_pixel(left, right, lb.x, lb.right(), y0, y1, d);
+        *ops += n;
+        s
     })
 }
 
@@ -481,6 +635,11 @@ pub fn pair_objects<const N: usize, const R: usize>(
     let mut out = StereoPairs::<N>::default();
     let mut cost = [[NO_PAIR; N]; N];
     let mut kept: heapless::Vec<(u16, u16, BlockMatch), KEPT_MATCHES> = heapless::Vec::new();
+    let scan_cost = if limits.zero_mean_d_o {
+        CoarseCost::Deferred
+    } else {
+        CoarseCost::Plain
+    };
     for (i, lo) in left.items.iter().enumerate().take(nl) {
         for (j, ro) in right.items.iter().enumerate().take(nr) {
             let (lb, rb) = (lo.bbox, ro.bbox);
@@ -501,6 +660,7 @@ pub fn pair_objects<const N: usize, const R: usize>(
                 rb,
                 d_lo,
                 d_hi,
+                scan_cost,
                 &mut out.stats.sad_ops,
             );
             match m {
@@ -527,21 +687,37 @@ pub fn pair_objects<const N: usize, const R: usize>(
         if !plausible {
             return None;
         }
-        if let Some((_, _, m)) = kept
+        let m = match kept
             .iter()
             .find(|(ki, kj, _)| *ki as usize == i && *kj as usize == j)
         {
-            return Some(*m);
-        }
-        match_boxes(
-            left_img,
-            right_img,
-            lo.bbox,
-            ro.bbox,
-            d_lo,
-            d_hi,
-            &mut scratch,
-        )
+            Some((_, _, m)) => Some(*m),
+            None => match_boxes(
+                left_img,
+                right_img,
+                lo.bbox,
+                ro.bbox,
+                d_lo,
+                d_hi,
+                scan_cost,
+                &mut scratch,
+            ),
+        };
+        m.map(|mut m| {
+            if scan_cost == CoarseCost::Deferred {
+                m.d_o = zero_mean_d_o(
+                    left_img,
+                    right_img,
+                    lo.bbox,
+                    ro.bbox,
+                    &m,
+                    d_lo,
+                    d_hi,
+                    &mut scratch,
+                );
+            }
+            m
+        })
     };
     let n = nl.max(nr);
     let mut col4row = [usize::MAX; N];
@@ -751,6 +927,43 @@ mod tests {
 
     /// [`match_boxes`] written plainly: every block pair and every
     /// whole-box candidate computed from scratch.
+    /// The zero-mean SAD written plainly.
+    fn naive_zsad(
+        left: &ImageView<'_>,
+        right: &ImageView<'_>,
+        x0: u32,
+        x1: u32,
+        y0: u32,
+        y1: u32,
+        d: i32,
+    ) -> Option<f32> {
+        let x1 = x1.min(left.width() as u32);
+        let y1 = y1.min(left.height() as u32).min(right.height() as u32);
+        if x1 <= x0 || y1 <= y0 {
+            return None;
+        }
+        let mut diffs = Vec::new();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let rx = x as i64 - d as i64;
+                if rx >= 0 && rx < right.width() as i64 {
+                    let a = left.row(y as usize)[x as usize] as i32;
+                    diffs.push(a - right.row(y as usize)[rx as usize] as i32);
+                }
+            }
+        }
+        let total = ((x1 - x0) * (y1 - y0)) as usize;
+        if diffs.is_empty() || 2 * diffs.len() < total {
+            return None;
+        }
+        // Σ|(a − b) − mean| as Σ|n(a − b) − Σ(a − b)| / n², exactly (i128),
+        // so near-ties between candidates round as in the core
+        let n = diffs.len() as i128;
+        let m: i128 = diffs.iter().map(|&v| v as i128).sum();
+        let acc: i128 = diffs.iter().map(|&v| (n * v as i128 - m).abs()).sum();
+        Some((acc as f64 / (n as f64 * n as f64)) as f32)
+    }
+
     fn naive_match(
         left: &ImageView<'_>,
         right: &ImageView<'_>,
@@ -758,6 +971,7 @@ mod tests {
         rb: Roi,
         d_lo: f32,
         d_hi: f32,
+        zero_mean: bool,
     ) -> Option<BlockMatch> {
         let y0 = lb.y.max(rb.y);
         let y1 = lb.bottom().min(rb.bottom());
@@ -806,7 +1020,8 @@ mod tests {
             if c < d_lo || c > d_hi {
                 continue;
             }
-            if let Some(s) = naive_sad(left, right, lb.x, lb.right(), y0, y1, c as i32) {
+            let whole = if zero_mean { naive_zsad } else { naive_sad };
+            if let Some(s) = whole(left, right, lb.x, lb.right(), y0, y1, c as i32) {
                 if s < best.0 {
                     best = (s, c);
                 }
@@ -835,6 +1050,7 @@ mod tests {
             lx in 0u32..100, lw in 1u32..60, rx in 0u32..100, rw in 1u32..60,
             ly in 0u32..30, lh in 1u32..30, ry in 0u32..30, rh in 1u32..30,
             d_lo in -40.0f32..20.0, span in 0.0f32..80.0, smooth in proptest::prelude::any::<bool>(),
+            zero_mean in proptest::prelude::any::<bool>(),
         ) {
             let mut s = seed;
             let mut next = || { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 };
@@ -843,10 +1059,68 @@ mod tests {
             let (lv, rv) = (ImageView::packed(&img, w, h).unwrap(), ImageView::packed(&img2, w, h).unwrap());
             let (lb, rb) = (Roi::new(lx, ly, lw, lh), Roi::new(rx, ry, rw, rh));
             let mut ops = 0u64;
-            let got = match_boxes(&lv, &rv, lb, rb, d_lo, d_lo + span, &mut ops);
-            let want = naive_match(&lv, &rv, lb, rb, d_lo, d_lo + span);
+            let cost = if zero_mean { CoarseCost::ZeroMean } else { CoarseCost::Plain };
+            let got = match_boxes(&lv, &rv, lb, rb, d_lo, d_lo + span, cost, &mut ops);
+            // deferred, then chosen: the same match
+            let deferred = match_boxes(&lv, &rv, lb, rb, d_lo, d_lo + span, CoarseCost::Deferred, &mut ops)
+                .map(|mut m| { m.d_o = zero_mean_d_o(&lv, &rv, lb, rb, &m, d_lo, d_lo + span, &mut ops); m });
+            if zero_mean {
+                proptest::prop_assert_eq!(got, deferred);
+            }
+            let want = naive_match(&lv, &rv, lb, rb, d_lo, d_lo + span, zero_mean);
             proptest::prop_assert_eq!(got, want);
         }
+    }
+
+    /// The failure the zero-mean `d_o` mends (h5 frame 14 of the synthetic
+    /// hauls: a fish entering at the right border, its depth 32 % short):
+    /// the left view shows only the fish's head, cut by the border, on dark
+    /// water; the right camera sees the water 40 grey levels brighter and
+    /// the whole head. Only the box-edge candidate on the uncut side is the
+    /// true disparity, and by the plain SAD the head matches the right
+    /// view's bright water better than the head itself.
+    #[test]
+    fn zero_mean_d_o_of_a_border_cut_fish_on_unequal_water() {
+        let (w, h) = (200usize, 40usize);
+        let true_d = 60i32;
+        // the fish: x in [120, 230) in the left view (cut at 200), rows 10..30
+        let fish = |x: i64, y: usize| (100..=230).contains(&x) && (10..30).contains(&y);
+        let body = |x: i64| 70 + ((x * 7) % 11) as u8; // a little texture
+        let left: Vec<u8> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as i64, i / w);
+                if fish(x, y) && x >= 120 {
+                    body(x)
+                } else {
+                    30
+                }
+            })
+            .collect();
+        let right: Vec<u8> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as i64, i / w);
+                let lx = x + true_d as i64;
+                if fish(lx, y) && lx >= 120 {
+                    body(lx) + 40
+                } else {
+                    70
+                }
+            })
+            .collect();
+        let (lv, rv) = (
+            ImageView::packed(&left, w, h).unwrap(),
+            ImageView::packed(&right, w, h).unwrap(),
+        );
+        let lb = Roi::new(120, 10, 80, 20); // cut by the right border
+        let rb = Roi::new(60, 10, 140, 20); // the whole visible fish
+        let mut ops = 0u64;
+        let plain = match_boxes(&lv, &rv, lb, rb, 0.0, 150.0, CoarseCost::Plain, &mut ops).unwrap();
+        let zm = match_boxes(&lv, &rv, lb, rb, 0.0, 150.0, CoarseCost::ZeroMean, &mut ops).unwrap();
+        assert_eq!(zm.d_o, true_d as f32, "zero-mean d_o {zm:?}");
+        assert_ne!(
+            plain.d_o, true_d as f32,
+            "the plain SAD was expected to fail here: {plain:?}"
+        );
     }
 
     #[test]

@@ -185,6 +185,8 @@ pub struct Limits {
     pub min_size_ratio: f64,
     /// Maximum μ_SAD per pixel.
     pub max_sad: f64,
+    /// d_o by the zero-mean whole-box SAD.
+    pub zero_mean_d_o: bool,
 }
 
 impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
@@ -196,6 +198,7 @@ impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
             min_row_overlap: l.min_row_overlap as f64,
             min_size_ratio: l.min_size_ratio as f64,
             max_sad: l.max_sad_per_pixel as f64,
+            zero_mean_d_o: l.zero_mean_d_o,
         }
     }
 }
@@ -241,6 +244,31 @@ fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option
     }
 }
 
+/// Zero-mean SAD per pixel over the pixels [`sad`] compares: the mean
+/// difference of the two windows taken out (core: `stereo::zsad_per_pixel`).
+fn zsad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option<f64> {
+    let x1 = x1.min(l.w as i64);
+    let y1 = y1.min(l.h as i64);
+    if x1 <= x0 || y1 <= y0 {
+        return None;
+    }
+    let mut diffs = Vec::new();
+    for y in y0..y1 {
+        for x in x0..x1 {
+            if let (Some(a), Some(b)) = (l.at(x, y), r.at(x - d, y)) {
+                diffs.push(a - b);
+            }
+        }
+    }
+    let total = ((x1 - x0) * (y1 - y0)) as usize;
+    if diffs.is_empty() || 2 * diffs.len() < total {
+        return None;
+    }
+    let n = diffs.len() as f64;
+    let mean = diffs.iter().sum::<f64>() / n;
+    Some(diffs.iter().map(|v| (v - mean).abs()).sum::<f64>() / n)
+}
+
 fn blocks(b: (i64, i64, i64, i64)) -> Vec<(i64, i64)> {
     (0..4)
         .map(|k| (b.0 + k * b.2 / 4, b.0 + (k + 1) * b.2 / 4))
@@ -255,6 +283,7 @@ fn match_boxes(
     rb: (i64, i64, i64, i64),
     dlo: f64,
     dhi: f64,
+    zero_mean: bool,
 ) -> Option<(f64, f64)> {
     let y0 = lb.1.max(rb.1);
     let y1 = (lb.1 + lb.3).min(rb.1 + rb.3);
@@ -302,7 +331,8 @@ fn match_boxes(
             continue;
         }
         // the core truncates toward zero when it turns a candidate into a shift
-        if let Some(s) = sad(l, r, lb.0, lb.0 + lb.2, y0, y1, c.trunc() as i64) {
+        let whole = if zero_mean { zsad } else { sad };
+        if let Some(s) = whole(l, r, lb.0, lb.0 + lb.2, y0, y1, c.trunc() as i64) {
             if s < best.0 {
                 best = (s, c);
             }
@@ -361,7 +391,7 @@ pub fn pair(
             if ((lb.0 + lb.2 - rb.0) as f64) < dlo || ((lb.0 - rb.0 - rb.2) as f64) > dhi {
                 continue;
             }
-            if let Some((mu, d)) = match_boxes(l, r, lb, rb, dlo, dhi) {
+            if let Some((mu, d)) = match_boxes(l, r, lb, rb, dlo, dhi, lim.zero_mean_d_o) {
                 if mu <= lim.max_sad {
                     cand[i].push((j, mu, d));
                 }
