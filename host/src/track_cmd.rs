@@ -191,14 +191,17 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
         .validate()
         .map_err(|e| InputError::plain("parameters", format!("{e}")))?;
     // the cameras' column offsets, from frames spread over the haul
-    // (decoded in parallel; the 16-bit warning names the first such file in
-    // frame order, so it is the same on every run)
+    // (decoded in parallel; the 16-bit warning and an error name the first
+    // such file in frame order, so they are the same on every run: rayon's
+    // collect into a `Result` returns whichever error a thread met first)
     let pairs: Vec<(GrayImage, GrayImage, Option<&std::path::Path>)> = {
         use rayon::prelude::*;
-        crate::columns::spread(haul.frames.len(), crate::columns::SAMPLE_FRAMES)
-            .into_par_iter()
-            .map(|i| haul.load_pair_quiet(&haul.frames[i], Some((width, height))))
-            .collect::<Result<_, _>>()?
+        let loaded: Vec<_> =
+            crate::columns::spread(haul.frames.len(), crate::columns::SAMPLE_FRAMES)
+                .into_par_iter()
+                .map(|i| haul.load_pair_quiet(&haul.frames[i], Some((width, height))))
+                .collect();
+        loaded.into_iter().collect::<Result<_, _>>()?
     };
     if let Some(path) = pairs.iter().find_map(|p| p.2) {
         haul.warn_16bit(path);
