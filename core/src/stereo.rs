@@ -893,6 +893,35 @@ pub fn solve_assignment<const N: usize>(cost: &[[f32; N]; N], n: usize, col4row:
 mod tests {
     use super::*;
 
+    /// The differences `a − b` of the pixels a SAD compares, written
+    /// plainly; `None` when fewer than half of the box's pixels have a
+    /// right counterpart.
+    fn naive_diffs(
+        left: &ImageView<'_>,
+        right: &ImageView<'_>,
+        x0: u32,
+        x1: u32,
+        y0: u32,
+        y1: u32,
+        d: i32,
+    ) -> Option<Vec<i32>> {
+        let w = right.width() as i64;
+        let x1 = x1.min(left.width() as u32);
+        let y1 = y1.min(left.height() as u32).min(right.height() as u32);
+        let (mut diffs, mut total) = (Vec::new(), 0usize);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                total += 1;
+                let rx = x as i64 - d as i64;
+                if rx >= 0 && rx < w {
+                    let a = left.row(y as usize)[x as usize] as i32;
+                    diffs.push(a - right.row(y as usize)[rx as usize] as i32);
+                }
+            }
+        }
+        (!diffs.is_empty() && 2 * diffs.len() >= total).then_some(diffs)
+    }
+
     /// The straightforward per-pixel SAD (the pre-session-6 code).
     fn naive_sad(
         left: &ImageView<'_>,
@@ -903,31 +932,14 @@ mod tests {
         y1: u32,
         d: i32,
     ) -> Option<f32> {
-        let w = right.width() as i64;
-        let x1 = x1.min(left.width() as u32);
-        let y1 = y1.min(left.height() as u32).min(right.height() as u32);
-        let (mut sum, mut n, mut total) = (0u64, 0u64, 0u64);
-        for y in y0..y1 {
-            for x in x0..x1 {
-                total += 1;
-                let rx = x as i64 - d as i64;
-                if rx >= 0 && rx < w {
-                    sum += left.row(y as usize)[x as usize]
-                        .abs_diff(right.row(y as usize)[rx as usize])
-                        as u64;
-                    n += 1;
-                }
-            }
-        }
-        if n == 0 || 2 * n < total {
-            return None;
-        }
-        Some(sum as f32 / n as f32)
+        let diffs = naive_diffs(left, right, x0, x1, y0, y1, d)?;
+        let sum: u64 = diffs.iter().map(|v| v.unsigned_abs() as u64).sum();
+        Some(sum as f32 / diffs.len() as f32)
     }
 
-    /// [`match_boxes`] written plainly: every block pair and every
-    /// whole-box candidate computed from scratch.
-    /// The zero-mean SAD written plainly.
+    /// The zero-mean SAD written plainly: Σ|(a − b) − mean| as
+    /// Σ|n(a − b) − Σ(a − b)| / n², exactly (i128), so near-ties between
+    /// candidates round as in the core.
     fn naive_zsad(
         left: &ImageView<'_>,
         right: &ImageView<'_>,
@@ -937,33 +949,15 @@ mod tests {
         y1: u32,
         d: i32,
     ) -> Option<f32> {
-        let x1 = x1.min(left.width() as u32);
-        let y1 = y1.min(left.height() as u32).min(right.height() as u32);
-        if x1 <= x0 || y1 <= y0 {
-            return None;
-        }
-        let mut diffs = Vec::new();
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let rx = x as i64 - d as i64;
-                if rx >= 0 && rx < right.width() as i64 {
-                    let a = left.row(y as usize)[x as usize] as i32;
-                    diffs.push(a - right.row(y as usize)[rx as usize] as i32);
-                }
-            }
-        }
-        let total = ((x1 - x0) * (y1 - y0)) as usize;
-        if diffs.is_empty() || 2 * diffs.len() < total {
-            return None;
-        }
-        // Σ|(a − b) − mean| as Σ|n(a − b) − Σ(a − b)| / n², exactly (i128),
-        // so near-ties between candidates round as in the core
+        let diffs = naive_diffs(left, right, x0, x1, y0, y1, d)?;
         let n = diffs.len() as i128;
         let m: i128 = diffs.iter().map(|&v| v as i128).sum();
         let acc: i128 = diffs.iter().map(|&v| (n * v as i128 - m).abs()).sum();
         Some((acc as f64 / (n as f64 * n as f64)) as f32)
     }
 
+    /// [`match_boxes`] written plainly: every block pair and every
+    /// whole-box candidate computed from scratch.
     fn naive_match(
         left: &ImageView<'_>,
         right: &ImageView<'_>,
