@@ -12,8 +12,9 @@ gates' inputs).
 
 Part 1, per *measurable* fish (wholly inside both views in some frame, as
 `fishtrack eval` counts them): the fish is *measured* when its majority
-track (tracks.csv boxes matched one-to-one to the truth's left boxes,
-Hungarian at IoU >= 0.4, as eval) has a length in fish.csv. Otherwise, in
+track (tracks.csv boxes matched one-to-one to the truth's left boxes by
+the optimal assignment on 1 - IoU with IoU >= 0.4, countable frames or
+not, the smallest id on a tie: as eval) has a length in fish.csv. Otherwise, in
 this order: *no track*; *not segmented* (no detections.csv box matches any
 of its wholly-inside frames); *not paired* (no stereo.csv row does);
 *paired, every length withheld* (the stereo rows of those frames carry no
@@ -89,7 +90,9 @@ def haul(haul_dir, out_dir, fish_tally, gate_errors, dev_errors):
         if not p:
             continue
         c = np.array([[iou(q[1], a["left_box"]) for q in p] for _, a in tl])
-        for i, j in zip(*linear_sum_assignment(-c)):
+        # eval's (motmetrics') cost: 1 - IoU, pairs under IoU 0.4 forbidden
+        cost = np.where(c >= 0.4, 1.0 - c, 1e6)
+        for i, j in zip(*linear_sum_assignment(cost)):
             if c[i, j] >= 0.4:
                 ids[tl[i][0]][p[j][0]] += 1
 
@@ -105,7 +108,8 @@ def haul(haul_dir, out_dir, fish_tally, gate_errors, dev_errors):
         if not ids[k]:
             why = "no track"
         else:
-            track = ids[k].most_common(1)[0][0]
+            # the majority track, the smallest id on a tie (as eval)
+            track = min(ids[k], key=lambda i: (-ids[k][i], i))
             if lengths.get(track):
                 why = "measured"
             elif not any(any_match(dets[a["frame"]], a["left_box"]) for a in inside):
