@@ -46,13 +46,17 @@ def iou(a, b):
     return iw * ih / u if u > 0 else 0
 
 
-def boxes_by_frame(path, box_cols, id_col=None, header=False):
+# stereo.csv's length_mm column: frame, left box (4), right box (4), head
+# x, y, z, tail x, y, z, length_mm (DESIGN.md); empty when not measured
+STEREO_LENGTH = 15
+
+
+def boxes_by_frame(path, box_cols, id_col=None):
+    """Rows by frame as (id or 0, box, row); header and comment lines,
+    whose first field is no frame number, are skipped."""
     out = collections.defaultdict(list)
     with open(path) as f:
-        rows = csv.reader(f)
-        if header:
-            next(rows, None)
-        for r in rows:
+        for r in csv.reader(f):
             if not r or not r[0].lstrip("-").isdigit():
                 continue
             out[int(r[0])].append((int(r[id_col]) if id_col is not None else 0,
@@ -77,7 +81,7 @@ def haul(haul_dir, out_dir, fish_tally, gate_errors, dev_errors):
                 truth[a["frame"]].append((k, a))
     tracks = boxes_by_frame(f"{out_dir}/tracks.csv", range(2, 6), 1)
     dets = boxes_by_frame(f"{out_dir}/detections.csv", range(2, 6))
-    stereo = boxes_by_frame(f"{out_dir}/stereo.csv", range(1, 5), header=True)
+    stereo = boxes_by_frame(f"{out_dir}/stereo.csv", range(1, 5))
     lengths = {}
     with open(f"{out_dir}/fish.csv") as f:
         for r in csv.DictReader(f):
@@ -97,7 +101,7 @@ def haul(haul_dir, out_dir, fish_tally, gate_errors, dev_errors):
                 ids[tl[i][0]][p[j][0]] += 1
 
     def any_match(rows, box, need_length=False):
-        return any(iou(b, box) >= 0.4 and (not need_length or r[15] != "")
+        return any(iou(b, box) >= 0.4 and (not need_length or r[STEREO_LENGTH] != "")
                    for _, b, r in rows)
 
     for k, f in enumerate(t["fish"]):
