@@ -132,6 +132,24 @@ pub struct Params {
     /// region without the first pass's objects grown by the disk's radius,
     /// and its objects pass the same tests. Default on.
     pub dim_level: bool,
+    /// Least ⌊τ_high⌋ of eq. (1) above the region's water, in water σ
+    /// (beyond the paper; `crate::segment::local`, "the high floor"). On a
+    /// fish a few σ above the water, Otsu's τ falls inside the water's
+    /// noise and eq. (1) puts τ_low and τ_high both there: M_high then
+    /// holds as much water as M_low, the ratio histogram of eq. (2) cannot
+    /// tell fish from water, and the fish floods into a water-sized
+    /// object that the contrast test rejects. Kept this far above the
+    /// water, M_high is the fish alone and the backprojection separates
+    /// it. 0 turns the floor off. Default 2.
+    pub high_floor_sigmas: f32,
+    /// Least edge step of a final object as a share of its contrast
+    /// (beyond the paper; `crate::segment::local::edge_sharp_enough`): the
+    /// mean grey-level step across the object's outline, two pixels in to
+    /// two pixels out, against its mean's height above the water. A fish
+    /// has a sharp outline (the step is most of its contrast); a glow of
+    /// backscatter or strobe haze rises smoothly, so its thresholded
+    /// outline sits on a slope. 0 turns the test off. Default 0.3.
+    pub edge_step_ratio: f32,
 
     /// Whether the right view is matched to the left's grey levels before
     /// the stereo pairing and the length are computed again on it, when
@@ -188,6 +206,8 @@ impl Default for Params {
             noise_floor: 1.25,
             split_merged: false,
             dim_level: true,
+            high_floor_sigmas: 2.0,
+            edge_step_ratio: 0.3,
             photometric: true,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
@@ -272,6 +292,8 @@ impl Params {
             ("min_elongation", self.min_elongation),
             ("contrast_sigmas", self.contrast_sigmas),
             ("noise_floor", self.noise_floor),
+            ("high_floor_sigmas", self.high_floor_sigmas),
+            ("edge_step_ratio", self.edge_step_ratio),
             ("v_ref_x", self.v_ref_x),
             ("v_ref_y", self.v_ref_y),
             ("alpha", self.alpha),
@@ -338,6 +360,16 @@ impl Params {
             "noise_floor",
             (0.0..=50.0).contains(&self.noise_floor),
             "0 to 50 grey levels",
+        )?;
+        range(
+            "high_floor_sigmas",
+            (0.0..=100.0).contains(&self.high_floor_sigmas),
+            "0 to 100",
+        )?;
+        range(
+            "edge_step_ratio",
+            (0.0..=1.0).contains(&self.edge_step_ratio),
+            "0 to 1",
         )?;
         range(
             "background_radius",

@@ -121,6 +121,8 @@ fuzz_target!(|data: &[u8]| {
     p.background_radius = b.u8v(p.background_radius);
     p.contrast_sigmas = b.f32(p.contrast_sigmas);
     p.local_smooth = b.u8v(p.local_smooth);
+    p.high_floor_sigmas = b.f32(p.high_floor_sigmas);
+    p.edge_step_ratio = b.f32(p.edge_step_ratio);
 
     // Pixels: the rest of the input, cycled; a flat grey frame when empty.
     let pixels = b.0;

@@ -101,6 +101,8 @@ fn main() -> Result<()> {
             p.contrast_sigmas = 0.0;
             p.split_merged = false;
             p.dim_level = false;
+            p.high_floor_sigmas = 0.0;
+            p.edge_step_ratio = 0.0;
         }
         if let Some(r) = bg_r {
             p.background_radius = r;

@@ -11,8 +11,10 @@
 //!    median, histogram backprojection (eq. (2)–(3)), area and variance
 //!    rejection (eq. (4)–(6); by default the variance limit follows the
 //!    frame's measured noise, [`local::variance_limit`]), closing then
-//!    opening (III.D), and (beyond the paper) an elongation test on the
-//!    final objects ([`local::elongated_enough`]).
+//!    opening (III.D), and (beyond the paper) an elongation test and an
+//!    edge test on the final objects ([`local::elongated_enough`],
+//!    [`local::edge_sharp_enough`]); τ_high is kept 2 water σ above the
+//!    water (`Params::high_floor_sigmas`).
 //!
 //!    Between the final labelling and the objects' statistics (beyond the
 //!    paper, `Params::split_merged`, default off), [`split`] cuts objects that are two
@@ -26,7 +28,8 @@
 //!    τ_low, set between the two, left out ([`local`]).
 //!
 //! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
-//! split_merged: false, dim_level: false, .. }` is the paper's Section III
+//! split_merged: false, dim_level: false, high_floor_sigmas: 0.0,
+//! edge_step_ratio: 0.0, .. }` is the paper's Section III
 //! exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
@@ -59,14 +62,14 @@
 //! 4 KiB, and works in the region's own buffers: workspace size unchanged).
 //!
 //! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
-//! `workspace_size(2048, 2048, 1 << 20)` = 18 114 900 bytes (17.3 MiB):
+//! `workspace_size(2048, 2048, 1 << 20)` = 18 123 092 bytes (17.3 MiB):
 //! 8 MiB for the two frame buffers (the second one, the full-resolution
 //! gradient, also holds the 4 × 4-downsampled frame, its gradient, labels
 //! and masks: 2.5 MiB, so the reduced-resolution pass costs no memory), 1 MiB for the morphology ring (sized
 //! for disks up to 31 × 31), about 0.3 MiB of labelling tables and region
 //! records, 16 KiB of run-table rows, and 8 MiB of ROI buffers (measured by the
 //! `full_size_frame_with_recommended_capacities` test). Recommended output
-//! capacity: `Objects<64, 16384>` (106 008 bytes; one run per mask row, so
+//! capacity: `Objects<64, 16384>` (106 264 bytes; one run per mask row, so
 //! 16384 runs hold 64 fish of 256 rows on average).
 //!
 //! Pixels are integers throughout; f32 (via `libm`, explicitly) is used
@@ -177,6 +180,9 @@ pub struct SegmentStats {
     /// Final objects rejected by the elongation test
     /// ([`local::elongated_enough`]).
     pub rejected_shape: u32,
+    /// Final objects rejected by the edge test
+    /// ([`local::edge_sharp_enough`], `Params::edge_step_ratio`).
+    pub rejected_edge: u32,
     /// Dim-level objects dropped as parts of a larger level-0 object they
     /// touch (`Params::dim_level`).
     pub rejected_fragment: u32,

@@ -311,6 +311,7 @@ proptest! {
         scale in prop::sample::select(vec![1u8, 4, 7, 16]), literal in any::<bool>(),
         elong in 0.0f32..4.0,
         smooth in prop::sample::select(vec![1u8, 3, 5, 15]),
+        floor in 0.0f32..6.0, edge in 0.0f32..1.0,
     ) {
         let mut rng = Lcg(seed);
         let fish: Vec<Fish> = (0..nfish).map(|_| Fish {
@@ -323,7 +324,8 @@ proptest! {
             double_threshold: dt, backprojection: bp, variance_rejection: vr,
             hist_bins: bins, disk_size: disk, mesh_line_len: mesh, area_min: amin,
             var_min: 0.0, coarse_scale: scale, variance_literal: literal,
-            min_elongation: elong, local_smooth: smooth, ..Params::default()
+            min_elongation: elong, local_smooth: smooth, high_floor_sigmas: floor,
+            edge_step_ratio: edge, ..Params::default()
         };
         let mut ws = vec![0u8; workspace_size(w, h, roi)];
         let mut out: Objects<8, 256> = Objects::new();
@@ -500,4 +502,136 @@ fn background_grid_fits_every_small_frame() {
             }
         }
     }
+}
+
+/// A `w × h` frame of flat water at 40 with Gaussian noise σ = `noise`,
+/// plus `blob(x, y)` grey levels.
+fn water_with(
+    w: usize,
+    h: usize,
+    noise: f32,
+    seed: u64,
+    blob: impl Fn(f32, f32) -> f32,
+) -> Vec<u8> {
+    let mut rng = Lcg(seed);
+    let mut img = vec![0u8; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let v = 40.0 + blob(x as f32, y as f32) + noise * rng.gauss();
+            img[y * w + x] = v.round().clamp(0.0, 255.0) as u8;
+        }
+    }
+    img
+}
+
+/// `(u, v)`: (x, y) in the frame of an axis at `angle` through (cx, cy).
+fn axes(x: f32, y: f32, cx: f32, cy: f32, angle: f32) -> (f32, f32) {
+    let (dx, dy) = (x - cx, y - cy);
+    let (c, s) = (angle.cos(), angle.sin());
+    (dx * c + dy * s, -dx * s + dy * c)
+}
+
+#[test]
+#[cfg_attr(miri, ignore)]
+fn dim_fish_needs_the_high_floor() {
+    // a sharp fish 5 grey levels (3.3 noise σ) above the water: eq. (1) puts τ_low and τ_high
+    // both in the water's noise, and without the floor it floods
+    let (w, h) = (512, 512);
+    let (cx, cy, a, b, angle) = (250.0, 260.0, 70.0, 18.0, 0.3);
+    let mut found = [0usize; 2];
+    for seed in 1..=4u64 {
+        let img = water_with(w, h, 1.5, seed, |x, y| {
+            let (u, v) = axes(x, y, cx, cy, angle);
+            if u * u / (a * a) + v * v / (b * b) <= 1.0 {
+                5.0
+            } else {
+                0.0
+            }
+        });
+        for (k, floor) in [0.0f32, 2.0].into_iter().enumerate() {
+            let mut p = Params::for_frame(w as u32);
+            p.high_floor_sigmas = floor;
+            let mut out: Objects<32, 8192> = Objects::new();
+            run(&img, w, h, &p, &mut out);
+            let hit = out.items.iter().any(|o| {
+                let d = ((o.obb.cx - cx).powi(2) + (o.obb.cy - cy).powi(2)).sqrt();
+                let len = 2.0 * o.obb.half_w;
+                d < 10.0 && (len - 2.0 * a).abs() < 0.1 * 2.0 * a
+            });
+            found[k] += hit as usize;
+        }
+    }
+    assert_eq!(
+        found,
+        [0, 4],
+        "fish found (of 4 seeds) without / with the floor"
+    );
+}
+
+#[test]
+#[cfg_attr(miri, ignore)]
+fn smooth_glow_is_not_a_fish_and_a_sharp_one_is() {
+    // a glow of backscatter (Gaussian profile) and a fish (sharp outline) of
+    // the same size and peak: the edge test tells them apart
+    let (w, h) = (512, 512);
+    let (cx, cy, a, b, angle, peak) = (256.0, 256.0, 60.0, 22.0, -0.4, 14.0);
+    let glow = |x: f32, y: f32| {
+        let (u, v) = axes(x, y, cx, cy, angle);
+        peak * (-(u * u / (a * a) + v * v / (b * b)) * 2.0).exp()
+    };
+    let fish = |x: f32, y: f32| {
+        let (u, v) = axes(x, y, cx, cy, angle);
+        if u * u / (a * a) + v * v / (b * b) <= 1.0 {
+            peak
+        } else {
+            0.0
+        }
+    };
+    let objects = |img: &[u8], ratio: f32| {
+        let mut p = Params::for_frame(w as u32);
+        p.edge_step_ratio = ratio;
+        let mut out: Objects<32, 8192> = Objects::new();
+        let st = run(img, w, h, &p, &mut out);
+        (out.items.len(), st.rejected_edge)
+    };
+    for seed in 1..=3u64 {
+        let g = water_with(w, h, 1.5, seed, glow);
+        let f = water_with(w, h, 1.5, seed, fish);
+        let (n_off, _) = objects(&g, 0.0);
+        let (n_on, rejected) = objects(&g, 0.3);
+        assert_eq!(n_off, 1, "seed {seed}: the glow passes every other test");
+        assert_eq!(
+            (n_on, rejected),
+            (0, 1),
+            "seed {seed}: the edge test rejects it"
+        );
+        assert_eq!(
+            objects(&f, 0.3),
+            (1, 0),
+            "seed {seed}: the sharp fish stays"
+        );
+    }
+}
+
+#[test]
+fn edge_test_judges_only_what_it_can() {
+    use super::local::{edge_sharp_enough, EdgeSteps, EDGE_MIN_SAMPLES};
+    let e = |sum, count, seen, seen_count| EdgeSteps {
+        sum,
+        count,
+        seen,
+        seen_count,
+    };
+    // contrast 10 (mean 42 over water 32), step 2 of 10: rejected at 0.3
+    assert!(!edge_sharp_enough(&e(2 * 100, 100, 42 * 50, 50), 32, 0.3));
+    assert!(edge_sharp_enough(&e(4 * 100, 100, 42 * 50, 50), 32, 0.3));
+    // off, too few samples, no contrast, no pixels: pass
+    assert!(edge_sharp_enough(&e(0, 100, 42 * 50, 50), 32, 0.0));
+    assert!(edge_sharp_enough(
+        &e(0, EDGE_MIN_SAMPLES - 1, 42 * 50, 50),
+        32,
+        0.3
+    ));
+    assert!(edge_sharp_enough(&e(-500, 100, 30 * 50, 50), 32, 0.3));
+    assert!(edge_sharp_enough(&e(0, 100, 0, 0), 32, 0.3));
 }

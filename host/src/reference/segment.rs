@@ -613,7 +613,10 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 res.regions.len() - 1
             };
             let (t_low, t_high) = if level == 0 {
-                (t_low, t_high)
+                // the high floor (core: `Params::high_floor_sigmas`)
+                let hf = p.high_floor_sigmas as f64;
+                let fl = (w_med + hf * s_w).min(255.0).floor();
+                (t_low, if hf > 0.0 { t_high.max(fl) } else { t_high })
             } else {
                 let fl = |k: f32| (w_med + k as f64 * s_w).min(255.0).floor();
                 (t_low.max(fl(DIM_FLOOR[0])), t_high.max(fl(DIM_FLOOR[1])))
@@ -762,6 +765,12 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 if e > 1.0 && l1 < e * e * l2 && !cut {
                     continue;
                 }
+                if p.edge_step_ratio > 0.0
+                    && !p.split_merged
+                    && !edge_sharp(comp, &post, &ins, &at, (rw, rh), w_med, p.edge_step_ratio)
+                {
+                    continue;
+                }
                 if level == 0 {
                     area0 = area0.max(comp.len());
                 } else if 2 * comp.len() < area0 && touches_cleared(comp) {
@@ -809,6 +818,79 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
 /// One fish, one object: an object sharing more than half of the smaller
 /// mask with another is the same fish; the lower level is kept, then the
 /// larger (first on a tie).
+/// The edge test (core: `segment::local::edge_sharp_enough`): over the
+/// object's outline, pixel by pixel, the step from the pixel `EDGE_GAP`
+/// inside to the one `EDGE_GAP` beyond the first pixel outside, along
+/// rows (at a row's first and last object pixel, when the object's run
+/// there is longer than `EDGE_GAP`) and columns (each object pixel whose
+/// pixel below, or above, is not in the mask); both inside the ellipse,
+/// the inner pixel in `mask`, the outer one outside it and above 0
+/// (cleared by the dim level). The mean step must reach `ratio` times the
+/// object's thresholded mean (inside the ellipse) above the water median;
+/// fewer than
+/// `EDGE_MIN_SAMPLES` samples pass.
+fn edge_sharp(
+    comp: &[(u32, u32)],
+    mask: &GrayImage,
+    ins: &[bool],
+    at: &dyn Fn(u32) -> u8,
+    (rw, rh): (u32, u32),
+    w_med: f64,
+    ratio: f32,
+) -> bool {
+    use fishtrack_core::segment::local::{EDGE_GAP, EDGE_MIN_SAMPLES};
+    let g = EDGE_GAP as i64;
+    let (w, h) = (rw as i64, rh as i64);
+    let in_mask = |x: i64, y: i64| {
+        x >= 0 && y >= 0 && x < w && y < h && mask.get_pixel(x as u32, y as u32).0[0] > 0
+    };
+    let val = |x: i64, y: i64| at((y * w + x) as u32) as f64;
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    let mut sample = |(xi, yi): (i64, i64), (xo, yo): (i64, i64)| {
+        if xo < 0 || yo < 0 || xo >= w || yo >= h {
+            return;
+        }
+        if xi < 0 || yi < 0 || xi >= w || yi >= h {
+            return;
+        }
+        let (ii, io) = ((yi * w + xi) as usize, (yo * w + xo) as usize);
+        if in_mask(xi, yi) && ins[ii] && !in_mask(xo, yo) && ins[io] {
+            let o = val(xo, yo);
+            if o > 0.0 {
+                sum += val(xi, yi) - o;
+                n += 1;
+            }
+        }
+    };
+    let (mut seen, mut seen_n) = (0.0f64, 0usize);
+    for &(x, y) in comp {
+        let (x, y) = (x as i64, y as i64);
+        if ins[(y * w + x) as usize] {
+            seen += val(x, y);
+            seen_n += 1;
+        }
+        // the run through (x, y) starts here / ends here, and is longer than g
+        if !in_mask(x - 1, y) && (0..=g).all(|k| in_mask(x + k, y)) {
+            sample((x + g, y), (x - 1 - g, y));
+        }
+        if !in_mask(x + 1, y) && (0..=g).all(|k| in_mask(x - k, y)) {
+            sample((x - g, y), (x + 1 + g, y));
+        }
+        if !in_mask(x, y + 1) {
+            sample((x, y - g), (x, y + 1 + g));
+        }
+        if !in_mask(x, y - 1) {
+            sample((x, y + g), (x, y - 1 - g));
+        }
+    }
+    if n < EDGE_MIN_SAMPLES || seen_n == 0 {
+        return true;
+    }
+    let step = sum / n as f64;
+    let contrast = seen / seen_n as f64 - w_med;
+    contrast <= 0.0 || step >= ratio as f64 * contrast
+}
+
 fn add_dedup(objs: &mut Vec<RefObject>, o: RefObject) {
     let mut i = 0;
     while i < objs.len() {
