@@ -132,15 +132,18 @@ pub struct Params {
     /// region without the first pass's objects grown by the disk's radius,
     /// and its objects pass the same tests. Default on.
     pub dim_level: bool,
-    /// Least ⌊τ_high⌋ of eq. (1) above the region's water, in water σ
-    /// (beyond the paper; `crate::segment::local`, "the high floor"). On a
-    /// fish a few σ above the water, Otsu's τ falls inside the water's
-    /// noise and eq. (1) puts τ_low and τ_high both there: M_high then
-    /// holds as much water as M_low, the ratio histogram of eq. (2) cannot
-    /// tell fish from water, and the fish floods into a water-sized
-    /// object that the contrast test rejects. Kept this far above the
-    /// water, M_high is the fish alone and the backprojection separates
-    /// it. 0 turns the floor off. Default 2.
+    /// Where eq. (1)'s ⌊τ_high⌋ is at or below the region's water median,
+    /// it is raised to this many water σ above it (beyond the paper;
+    /// `crate::segment::local`, "the high floor"). On a fish a few σ above
+    /// the water, Otsu's τ falls inside the water's noise and eq. (1) puts
+    /// τ_low and τ_high both there: M_high then holds half the water, as
+    /// M_low does, the ratio histogram of eq. (2) cannot tell fish from
+    /// water, and the fish floods into a water-sized object that the
+    /// contrast test rejects. Raised, M_high is the fish alone and the
+    /// backprojection separates it. (Raising every τ_high below the floor,
+    /// not only the collapsed ones, also cuts the dim tails off fish that
+    /// eq. (1) measured well: per-frame 3-D length MAPE 3.05 % → 3.67 % on
+    /// seeds 1–12.) 0 turns the floor off. Default 2.
     pub high_floor_sigmas: f32,
     /// Least edge step of a final object as a share of its contrast
     /// (beyond the paper; `crate::segment::local::edge_sharp_enough`): the

@@ -15,14 +15,15 @@
 //! - Otsu's τ on the ellipse's 256-bin histogram; τ_low, τ_high by eq. (1)
 //!   ([`crate::threshold::shifted_threshold`]); `M_x = {p > ⌊τ_x⌋}` (the
 //!   OpenCV/imageproc "foreground is p > t" convention). The high floor
-//!   (beyond the paper, `Params::high_floor_sigmas`, default 2): ⌊τ_high⌋
-//!   is kept that many water σ above the water's median (Otsu's lower
-//!   class, [`water_level`]). On a fish 3–5 σ above the water, Otsu's τ
-//!   falls in the water's noise and eq. (1) puts both thresholds there,
-//!   so M_high holds as much water as M_low, eq. (2)'s ratio is about 1
-//!   on every bin and the fish floods into a water-sized object that the
-//!   contrast test rejects (measured on seeds 1–12: seg recall 0.757 →
-//!   0.783 with the floor alone; README, session 18).
+//!   (beyond the paper, `Params::high_floor_sigmas`, default 2): a
+//!   ⌊τ_high⌋ at or below the water's median (Otsu's lower class,
+//!   [`water_level`]) is raised to that many water σ above it. On a fish
+//!   3–5 σ above the water, Otsu's τ falls in the water's noise and eq.
+//!   (1) puts both thresholds there, so M_high holds half the water as
+//!   M_low does, eq. (2)'s ratio is about 1 on every bin and the fish
+//!   floods into a water-sized object that the contrast test rejects
+//!   (measured on seeds 1–12: seg recall 0.757 → 0.780 with the floor
+//!   alone; README, session 18).
 //! - Both masks get the 3 × 3 median (replicated ROI border, as
 //!   `cv2.medianBlur`), then are restricted to the ellipse again.
 //! - `H_low`, `H_high`: `hist_bins`-bin histograms of the pixels under the
@@ -45,8 +46,8 @@
 //!   objects whose outline is not a step are dropped
 //!   ([`edge_sharp_enough`]): a fish's outline is sharp, a glow of
 //!   backscatter or strobe haze thresholded near the water rises smoothly
-//!   (seeds 1–12 with the high floor: seg precision 0.899 → 0.935 at
-//!   recall 0.783 → 0.780).
+//!   (seeds 1–12 with the high floor: seg precision 0.900 → 0.936 at
+//!   recall 0.780 → 0.776).
 //! - The dim level (beyond the paper, `Params::dim_level`): Otsu's τ of a
 //!   region holding a bright fish and a dim one falls between them and
 //!   eq. (1)'s τ_low above the dim one, which is lost. So once level 0
@@ -514,8 +515,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                 t_low.max(floor(DIM_LEVEL_FLOOR[0])),
                 t_high.max(floor(DIM_LEVEL_FLOOR[1])),
             )
-        } else if params.high_floor_sigmas > 0.0 {
-            // the high floor (beyond the paper): M_high stays out of the water
+        } else if params.high_floor_sigmas > 0.0 && t_high <= w_med {
+            // the high floor (beyond the paper): eq. (1)'s M_high took half
+            // the water; it stays out of it
             let s = w_sigma.max(params.noise_floor);
             let fl = (w_med as f32 + params.high_floor_sigmas * s).min(255.0) as u8;
             (t_low, t_high.max(fl))

@@ -13,8 +13,8 @@
 //!    frame's measured noise, [`local::variance_limit`]), closing then
 //!    opening (III.D), and (beyond the paper) an elongation test and an
 //!    edge test on the final objects ([`local::elongated_enough`],
-//!    [`local::edge_sharp_enough`]); τ_high is kept 2 water σ above the
-//!    water (`Params::high_floor_sigmas`).
+//!    [`local::edge_sharp_enough`]); a τ_high at or below the water is
+//!    raised 2 water σ above it (`Params::high_floor_sigmas`).
 //!
 //!    Between the final labelling and the objects' statistics (beyond the
 //!    paper, `Params::split_merged`, default off), [`split`] cuts objects that are two

@@ -616,7 +616,16 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 // the high floor (core: `Params::high_floor_sigmas`)
                 let hf = p.high_floor_sigmas as f64;
                 let fl = (w_med + hf * s_w).min(255.0).floor();
-                (t_low, if hf > 0.0 { t_high.max(fl) } else { t_high })
+                // only where eq. (1)'s ⌊τ_high⌋ is at or below the water median
+                let collapsed = t_high.floor() <= w_med;
+                (
+                    t_low,
+                    if hf > 0.0 && collapsed {
+                        t_high.max(fl)
+                    } else {
+                        t_high
+                    },
+                )
             } else {
                 let fl = |k: f32| (w_med + k as f64 * s_w).min(255.0).floor();
                 (t_low.max(fl(DIM_FLOOR[0])), t_high.max(fl(DIM_FLOOR[1])))
