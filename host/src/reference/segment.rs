@@ -824,9 +824,6 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
     res
 }
 
-/// One fish, one object: an object sharing more than half of the smaller
-/// mask with another is the same fish; the lower level is kept, then the
-/// larger (first on a tie).
 /// The edge test (core: `segment::local::edge_sharp_enough`): over the
 /// object's outline, pixel by pixel, the step from the pixel `EDGE_GAP`
 /// inside to the one `EDGE_GAP` beyond the first pixel outside, along
@@ -836,8 +833,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
 /// the inner pixel in `mask`, the outer one outside it and above 0
 /// (cleared by the dim level). The mean step must reach `ratio` times the
 /// object's thresholded mean (inside the ellipse) above the water median;
-/// fewer than
-/// `EDGE_MIN_SAMPLES` samples pass.
+/// fewer than `EDGE_MIN_SAMPLES` samples pass.
 fn edge_sharp(
     comp: &[(u32, u32)],
     mask: &GrayImage,
@@ -900,6 +896,9 @@ fn edge_sharp(
     contrast <= 0.0 || step >= ratio as f64 * contrast
 }
 
+/// One fish, one object: an object sharing more than half of the smaller
+/// mask with another is the same fish; the lower level is kept, then the
+/// larger (first on a tie).
 fn add_dedup(objs: &mut Vec<RefObject>, o: RefObject) {
     let mut i = 0;
     while i < objs.len() {
