@@ -15,7 +15,10 @@ carry two or more track ids), *id shared* (its one track id is matched to
 another fish too), *matched in < half* of its countable frames, or a
 *success*. Also counts the countable fish frames no track row matches
 that a detections.csv box and a stereo.csv row do match (segmented and
-paired, but dropped by the tracker).
+paired, but dropped by the tracker), and the *linking ceiling*: the fish
+whose detections.csv boxes alone match them in at least half of their
+countable frames, i.e. the success an ideal linker of these detections
+would reach (what segmentation leaves to the tracker).
 """
 import collections
 import csv
@@ -42,6 +45,14 @@ def rows_by_frame(path, box_cols, id_col=None):
             out[int(r[0])].append((int(r[id_col]) if id_col is not None else 0,
                                    [float(r[c]) for c in box_cols]))
     return out
+
+
+CEILING = "linking ceiling (fish an ideal linker of the detections would label)"
+
+
+def extra(key):
+    """Tally lines that are not a class of fish (no share)."""
+    return key.startswith("frames") or key == CEILING
 
 
 def haul(haul_dir, out_dir, tally):
@@ -87,6 +98,8 @@ def haul(haul_dir, out_dir, tally):
         for tid in c:
             owners[tid].add(fid)
     for fid, k in n.items():
+        if 2 * seg[fid] >= k and seg[fid] > 0:
+            tally[CEILING] += 1
         c = ids.get(fid, collections.Counter())
         hits = sum(c.values())
         if hits == 0:
@@ -108,9 +121,9 @@ def main(argv):
     tally = collections.Counter()
     for h, o in zip(argv[0::2], argv[1::2]):
         haul(h, o, tally)
-    fish = sum(v for k, v in tally.items() if not k.startswith("frames"))
+    fish = sum(v for k, v in tally.items() if not extra(k))
     for k, v in sorted(tally.items(), key=lambda x: -x[1]):
-        share = f"{100 * v / fish:5.1f} %" if not k.startswith("frames") else "       "
+        share = f"{100 * v / fish:5.1f} %" if not extra(k) else "       "
         print(f"{v:5d} {share}  {k}")
 
 

@@ -2,7 +2,9 @@
 //! run on a small synthetic haul (512², 12 frame pairs) and checked
 //! against `fishtrack eval`'s own counts: `length_accounting.py` (where
 //! per-fish lengths are lost) accounts for exactly eval's measurable fish,
-//! and `intensity_seed_probe.py` for exactly its countable fish-frames.
+//! `intensity_seed_probe.py` for exactly its countable fish-frames, and
+//! `track_failures.py` (why fish fail eq. 16) for exactly its fish, with
+//! eval's successes and a linking ceiling between those and the fish.
 //! Needs python3 with cv2, numpy and scipy; skipped without them unless
 //! `FISHTRACK_REQUIRE_PYTHON=1` (the README's test command sets it).
 
@@ -133,4 +135,28 @@ fn the_scripts_account_for_evals_fish() {
         "detected {detected} vs eval tp {}\n{probe}",
         det["tp"]
     );
+
+    // track_failures.py: every fish with a countable frame in one class,
+    // its successes eval's, its linking ceiling a count of those fish (not
+    // a bound on the successes: a track's predicted rows may match a fish
+    // in frames no detection does)
+    let tf = ok(Command::new("python3")
+        .arg(script("track_failures.py"))
+        .arg(&haul)
+        .arg(&out));
+    let success = &eval["tracking"]["success"];
+    let fish = success["fish"].as_u64().unwrap();
+    let classes: u64 = tf
+        .lines()
+        .filter(|l| l.contains('%'))
+        .map(|l| l.split_whitespace().next().unwrap().parse::<u64>().unwrap())
+        .sum();
+    assert_eq!(classes, fish, "{tf}");
+    let labelled = success["correctly_labelled"].as_u64().unwrap();
+    assert_eq!(count(&tf, "success"), labelled, "{tf}");
+    let ceiling = count(
+        &tf,
+        "linking ceiling (fish an ideal linker of the detections would label)",
+    );
+    assert!(ceiling > 0 && ceiling <= fish, "{tf}");
 }
