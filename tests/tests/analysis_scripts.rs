@@ -4,7 +4,7 @@
 //! per-fish lengths are lost) accounts for exactly eval's measurable fish,
 //! `intensity_seed_probe.py` for exactly its countable fish-frames, and
 //! `track_failures.py` (why fish fail eq. 16) for exactly its fish, with
-//! eval's successes and a linking ceiling between those and the fish.
+//! eval's successes and a linking ceiling of at most those fish.
 //! Needs python3 with cv2, numpy and scipy; skipped without them unless
 //! `FISHTRACK_REQUIRE_PYTHON=1` (the README's test command sets it).
 
