@@ -98,7 +98,7 @@ def haul(haul_dir, out_dir, tally):
         for tid in c:
             owners[tid].add(fid)
     for fid, k in n.items():
-        if 2 * seg[fid] >= k and seg[fid] > 0:
+        if 2 * seg[fid] >= k:  # k >= 1, so at least one detection
             tally[CEILING] += 1
         c = ids.get(fid, collections.Counter())
         hits = sum(c.values())
