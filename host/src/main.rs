@@ -69,7 +69,9 @@ enum Command {
         /// Rectification free scaling (OpenCV stereoRectify alpha; default
         /// 0.25): 0 keeps only valid pixels, 1 keeps the whole raw views,
         /// -1 is OpenCV's default scaling, `auto` is 0.25 unless that
-        /// magnifies the raw views, then the least scale that does not.
+        /// magnifies the raw views, then the least scale that does not,
+        /// `canvas` is 0.25's scale on a frame large enough to keep every
+        /// raw pixel (the views' edges filled with water).
         #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
         rect_alpha: Option<fishtrack::rectify::Scaling>,
     },
@@ -113,7 +115,7 @@ enum Command {
     },
 }
 
-/// `--rect-alpha auto|A` ([`fishtrack::track_cmd::parse_scaling`]).
+/// `--rect-alpha auto|canvas|A` ([`fishtrack::track_cmd::parse_scaling`]).
 fn parse_rect_alpha(s: &str) -> Result<fishtrack::rectify::Scaling, String> {
     fishtrack::track_cmd::parse_scaling(s).map_err(|e| e.to_string())
 }

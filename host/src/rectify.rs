@@ -187,6 +187,9 @@ pub enum Scaling {
     /// and crops 0.5–14 % of the raw left view; the rule keeps 89–100 % of
     /// it (README "Input: a haul directory").
     NoMagnification,
+    /// `--rect-alpha canvas`: the scale of [`DEFAULT_ALPHA`] on a canvas
+    /// that holds every raw pixel ([`stereo_rectify_canvas`]).
+    Canvas,
 }
 
 impl Default for Scaling {
@@ -205,6 +208,7 @@ impl Scaling {
         match self {
             Scaling::Alpha(a) => a,
             Scaling::NoMagnification => no_magnification_alpha(c, DEFAULT_ALPHA),
+            Scaling::Canvas => DEFAULT_ALPHA,
         }
     }
 }
@@ -255,6 +259,13 @@ pub struct Rectification {
     pub roi1: [u32; 4],
     /// OpenCV's `validPixROI2`, the same for the right image.
     pub roi2: [u32; 4],
+    /// The rectified frames' size `(width, height)`: the raw size, except
+    /// for [`stereo_rectify_canvas`].
+    pub size: (u32, u32),
+    /// The left and right raw views' outer rectangles on the canvas of
+    /// [`stereo_rectify_canvas`] (every raw pixel lies inside); `None` for
+    /// the other rectifications.
+    pub outer: Option<[[u32; 4]; 2]>,
 }
 
 /// OpenCV's `getUndistortRectangles`: the border points of a 9×9 grid over
@@ -496,7 +507,68 @@ pub fn stereo_rectify_alpha(c: &StereoCalib, alpha: f64) -> Rectification {
         vertical: idx == 1,
         roi1,
         roi2,
+        size: (c.width, c.height),
+        outer: None,
     }
+}
+
+/// Extra rectified pixels around the canvas of [`stereo_rectify_canvas`]:
+/// the raw border is found on a 9 × 9 grid of its points
+/// ([`undistort_rectangles`]) and may bulge a little between them.
+pub const CANVAS_MARGIN: f64 = 4.0;
+
+/// [`stereo_rectify_alpha`]'s rectification at the scale of `alpha`, drawn
+/// on a canvas large enough to hold every raw pixel of both cameras (beyond
+/// OpenCV, which fits the views to the raw size): the principal point
+/// moves by the canvas's offset and the frame grows to the union of both
+/// views' outer rectangles (plus [`CANVAS_MARGIN`]). Nothing of the raw
+/// views is cropped and nothing is shrunk: `alpha = 1` keeps every pixel
+/// by scaling the views down (fish smaller, some below θ_A^L), `alpha = 0`
+/// keeps the scale by cropping the views' edges, where fish enter and
+/// leave. `roi1`, `roi2` are the inner (every pixel valid) rectangles on
+/// the canvas.
+pub fn stereo_rectify_canvas(c: &StereoCalib, alpha: f64) -> Rectification {
+    let mut r = stereo_rectify_alpha(c, alpha);
+    let k1 = StereoCalib::dist8(&c.d1);
+    let k2 = StereoCalib::dist8(&c.d2);
+    let (in1, out1) = undistort_rectangles(&c.m1, &k1, &r.r1, &r.p1, c.width, c.height);
+    let (in2, out2) = undistort_rectangles(&c.m2, &k2, &r.r2, &r.p2, c.width, c.height);
+    let x0 = (out1[0].min(out2[0]) - CANVAS_MARGIN).floor();
+    let y0 = (out1[1].min(out2[1]) - CANVAS_MARGIN).floor();
+    let x1 = ((out1[0] + out1[2]).max(out2[0] + out2[2]) + CANVAS_MARGIN).ceil();
+    let y1 = ((out1[1] + out1[3]).max(out2[1] + out2[3]) + CANVAS_MARGIN).ceil();
+    // (a degenerate calibration gives NaN or huge bounds: keep the raw size)
+    let ok = |v: f64| v.is_finite() && v.abs() < 65_535.0;
+    if ![x0, y0, x1, y1].into_iter().all(ok) || x1 <= x0 || y1 <= y0 {
+        return r;
+    }
+    let (w, h) = ((x1 - x0) as u32, (y1 - y0) as u32);
+    for p in [&mut r.p1, &mut r.p2] {
+        p[(0, 2)] -= x0;
+        p[(1, 2)] -= y0;
+    }
+    r.q[(0, 3)] = -r.p1[(0, 2)];
+    r.q[(1, 3)] = -r.p1[(1, 2)];
+    let inner = |i: &[f64; 4]| -> [u32; 4] {
+        const EPS: f64 = 1e-7;
+        let ax = (i[0] - x0 - EPS).ceil().clamp(0.0, w as f64);
+        let ay = (i[1] - y0 - EPS).ceil().clamp(0.0, h as f64);
+        let bx = (i[0] + i[2] - x0 + EPS).floor().clamp(0.0, w as f64);
+        let by = (i[1] + i[3] - y0 + EPS).floor().clamp(0.0, h as f64);
+        if bx <= ax || by <= ay {
+            return [0; 4];
+        }
+        [ax as u32, ay as u32, (bx - ax) as u32, (by - ay) as u32]
+    };
+    r.roi1 = inner(&in1);
+    r.roi2 = inner(&in2);
+    let outer = |o: &[f64; 4]| {
+        let m = CANVAS_MARGIN;
+        inner(&[o[0] - m, o[1] - m, o[2] + 2.0 * m, o[3] + 2.0 * m])
+    };
+    r.outer = Some([outer(&out1), outer(&out2)]);
+    r.size = (w, h);
+    r
 }
 
 /// One camera of a rectified pair: what maps its raw pixels to rectified
@@ -513,10 +585,14 @@ pub struct RectifiedCamera {
     pub p: Matrix3x4<f64>,
     /// `(P[:, :3]·R)⁻¹`: rectified pixel → normalized ray of the raw camera.
     pub ir: Matrix3<f64>,
-    /// Image width (raw and rectified).
+    /// Rectified image width.
     pub width: u32,
-    /// Image height (raw and rectified).
+    /// Rectified image height.
     pub height: u32,
+    /// Raw image width.
+    pub raw_width: u32,
+    /// Raw image height.
+    pub raw_height: u32,
 }
 
 /// Whether a raw box from [`RectifiedCamera::raw_box`] holds any of the raw
@@ -561,14 +637,20 @@ impl RectifiedCamera {
             ir,
             width,
             height,
+            raw_width: width,
+            raw_height: height,
         }
     }
 
     /// Left and right cameras of a calibration and its rectification.
     pub fn pair(c: &StereoCalib, rect: &Rectification) -> (Self, Self) {
+        let on_canvas = |mut cam: Self| {
+            (cam.width, cam.height) = rect.size;
+            cam
+        };
         (
-            Self::new(c.m1, &c.d1, rect.r1, rect.p1, c.width, c.height),
-            Self::new(c.m2, &c.d2, rect.r2, rect.p2, c.width, c.height),
+            on_canvas(Self::new(c.m1, &c.d1, rect.r1, rect.p1, c.width, c.height)),
+            on_canvas(Self::new(c.m2, &c.d2, rect.r2, rect.p2, c.width, c.height)),
         )
     }
 
@@ -664,7 +746,7 @@ impl RectifiedCamera {
         y1: f64,
     ) -> (f64, f64, f64, f64) {
         let (a, b, c, d) = self.rect_box_to_raw(x0, y0, x1, y1);
-        let (w, h) = (self.width as f64 - 0.5, self.height as f64 - 0.5);
+        let (w, h) = (self.raw_width as f64 - 0.5, self.raw_height as f64 - 0.5);
         let cx = |v: f64| v.clamp(-0.5, w);
         let cy = |v: f64| v.clamp(-0.5, h);
         (cx(a), cy(b), cx(c), cy(d))
@@ -881,6 +963,246 @@ impl Fill {
     }
 }
 
+/// The water fill of a canvas rectification ([`stereo_rectify_canvas`]):
+/// the rectified pixels with no raw source show the water's local level
+/// instead of the mirrored raw image ([`Fill::Reflect101`]), so a fish
+/// near the raw border has no mirror twin beyond it and the border is no
+/// edge. The level of a pixel is the median of the valid pixels within
+/// [`WaterFill::BAND`] px of the fill in its [`WaterFill::CELL`]-px cell
+/// (the nearest cell that has some, else the whole band's).
+#[derive(Debug, Clone)]
+pub struct WaterFill {
+    width: usize,
+    /// Pixels (row-major indices) with no raw source, with their cell.
+    invalid: Vec<(u32, u32)>,
+    /// Valid pixels near the fill, with their cell.
+    band: Vec<(u32, u32)>,
+    /// Per cell, the cell whose band median it takes (`u32::MAX`: the
+    /// whole band's).
+    source_cell: Vec<u32>,
+    cells: usize,
+    cells_x: usize,
+}
+
+impl WaterFill {
+    /// Width of the band of valid pixels sampled, px.
+    pub const BAND: usize = 8;
+    /// Cell side, px.
+    pub const CELL: usize = 64;
+
+    /// From a rectified view's float map and the raw size.
+    pub fn new(map: &RectifyMap, raw_w: u32, raw_h: u32) -> Self {
+        let (w, h) = (map.width as usize, map.height as usize);
+        let (rw, rh) = (raw_w as f32 - 1.0, raw_h as f32 - 1.0);
+        let bad: Vec<bool> = map
+            .map_x
+            .iter()
+            .zip(&map.map_y)
+            .map(|(&x, &y)| !(x >= 0.0 && y >= 0.0 && x <= rw && y <= rh))
+            .collect();
+        // distance ≤ BAND to an invalid pixel (Chebyshev): separable max
+        let r = Self::BAND;
+        let mut rows = vec![false; w * h];
+        for y in 0..h {
+            let row = &bad[y * w..(y + 1) * w];
+            let mut last: Option<usize> = None;
+            let mut next = vec![usize::MAX; w];
+            for x in (0..w).rev() {
+                if row[x] {
+                    last = Some(x);
+                }
+                next[x] = last.unwrap_or(usize::MAX);
+            }
+            let mut prev: Option<usize> = None;
+            for x in 0..w {
+                if row[x] {
+                    prev = Some(x);
+                }
+                let near = prev.is_some_and(|p| x - p <= r) || next[x].saturating_sub(x) <= r;
+                rows[y * w + x] = near;
+            }
+        }
+        let mut near = vec![false; w * h];
+        for x in 0..w {
+            for y in 0..h {
+                let (a, b) = (y.saturating_sub(r), (y + r).min(h - 1));
+                near[y * w + x] = (a..=b).any(|yy| rows[yy * w + x]);
+            }
+        }
+        let (cw, ch) = (w.div_ceil(Self::CELL), h.div_ceil(Self::CELL));
+        let cell = |i: usize| ((i / w) / Self::CELL * cw + (i % w) / Self::CELL) as u32;
+        let mut invalid = Vec::new();
+        let mut band = Vec::new();
+        let mut has = vec![false; cw * ch];
+        for i in 0..w * h {
+            if bad[i] {
+                invalid.push((i as u32, cell(i)));
+            } else if near[i] {
+                band.push((i as u32, cell(i)));
+                has[cell(i) as usize] = true;
+            }
+        }
+        let source_cell = (0..cw * ch)
+            .map(|c| {
+                let (cx, cy) = ((c % cw) as i64, (c / cw) as i64);
+                let mut best: Option<(i64, u32)> = None;
+                for (k, &hk) in has.iter().enumerate() {
+                    if !hk {
+                        continue;
+                    }
+                    let (kx, ky) = ((k % cw) as i64, (k / cw) as i64);
+                    let d = (kx - cx).pow(2) + (ky - cy).pow(2);
+                    if best.is_none_or(|b| d < b.0) {
+                        best = Some((d, k as u32));
+                    }
+                }
+                best.map_or(u32::MAX, |b| b.1)
+            })
+            .collect();
+        WaterFill {
+            width: w,
+            invalid,
+            band,
+            source_cell,
+            cells: cw * ch,
+            cells_x: cw,
+        }
+    }
+
+    /// Overwrites the fill of a rectified frame with the water level.
+    pub fn apply(&self, img: &mut GrayImage) {
+        if self.invalid.is_empty() || img.width() as usize != self.width {
+            return;
+        }
+        let buf: &mut [u8] = img;
+        let mut hist = vec![[0u32; 256]; self.cells];
+        let mut all = [0u32; 256];
+        for &(i, c) in &self.band {
+            let v = buf[i as usize] as usize;
+            hist[c as usize][v] += 1;
+            all[v] += 1;
+        }
+        // median and 1.4826·MAD of a histogram
+        let level_sigma = |h: &[u32; 256]| -> (f32, f32) {
+            let n: u32 = h.iter().sum();
+            let rank = |h: &[u32; 256], n: u32| -> usize {
+                let mut acc = 0;
+                for (v, &k) in h.iter().enumerate() {
+                    acc += k;
+                    if 2 * acc >= n {
+                        return v;
+                    }
+                }
+                0
+            };
+            if n == 0 {
+                return (0.0, 0.0);
+            }
+            let m = rank(h, n);
+            let mut dev = [0u32; 256];
+            for (v, &k) in h.iter().enumerate() {
+                dev[v.abs_diff(m)] += k;
+            }
+            (m as f32, 1.4826 * rank(&dev, n) as f32)
+        };
+        let global = level_sigma(&all);
+        // one noise σ for the whole fill, the frame's own (the core's
+        // estimate, on the frame as remapped: the strands of the mesh and
+        // the cells' level differences inflate the band's spread), levels
+        // per cell interpolated bilinearly between cell centres (no steps
+        // at the cells' edges)
+        let s = fishtrack_core::ImageView::packed(buf, self.width, buf.len() / self.width)
+            .map_or(global.1, |v| {
+                fishtrack_core::noise::noise_sigma16(v) as f32 / 16.0
+            });
+        let level: Vec<f32> = (0..self.cells)
+            .map(|c| match self.source_cell[c] {
+                u32::MAX => global.0,
+                k => level_sigma(&hist[k as usize]).0,
+            })
+            .collect();
+        let (cw, ch) = (self.cells_x, self.cells / self.cells_x.max(1));
+        let at = |x: usize, y: usize| level[y.min(ch - 1) * cw + x.min(cw - 1)];
+        let half = Self::CELL as f32 / 2.0;
+        for &(i, _) in &self.invalid {
+            let (px, py) = (
+                (i as usize % self.width) as f32,
+                (i as usize / self.width) as f32,
+            );
+            let fx = ((px - half) / Self::CELL as f32).max(0.0);
+            let fy = ((py - half) / Self::CELL as f32).max(0.0);
+            let (x0, y0) = (fx as usize, fy as usize);
+            let (ax, ay) = (fx - x0 as f32, fy - y0 as f32);
+            let m = (1.0 - ay) * ((1.0 - ax) * at(x0, y0) + ax * at(x0 + 1, y0))
+                + ay * ((1.0 - ax) * at(x0, y0 + 1) + ax * at(x0 + 1, y0 + 1));
+            // water noise of the band's σ (a fixed pseudo-random pattern:
+            // the frame's noise and gradient statistics see water here)
+            let mut x = i.wrapping_mul(0x9E37_79B9) ^ 0x85EB_CA6B;
+            let mut g = 0.0f32;
+            for _ in 0..4 {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                g += (x & 0xFFFF) as f32 / 65535.0;
+            }
+            // sum of 4 uniforms: mean 2, variance 1/3
+            let z = (g - 2.0) * 3f32.sqrt();
+            buf[i as usize] = (m + s * z).round().clamp(0.0, 255.0) as u8;
+        }
+    }
+}
+
+/// The raw view's border on the rectified frame: the raw frame's four
+/// edges (pixel-edge convention, `−½` and `w − ½`) mapped point by point
+/// ([`RectifiedCamera::raw_to_rect`], 1 px apart), each side resampled at
+/// [`fishtrack_core::track::outline::OUTLINE_POINTS`] even positions along
+/// its own span (a sample that does not map takes its neighbour's value).
+pub fn outline(cam: &RectifiedCamera) -> fishtrack_core::track::ViewOutline {
+    use fishtrack_core::track::outline::{Side, OUTLINE_POINTS};
+    let (w, h) = (cam.raw_width as f64, cam.raw_height as f64);
+    // points along one raw edge, as (along, across) in rectified pixels
+    let edge = |horizontal: bool, fixed: f64| -> Vec<(f64, f64)> {
+        let n = if horizontal { w } else { h } as usize;
+        (0..=n)
+            .filter_map(|i| {
+                let t = i as f64 - 0.5;
+                let (u, v) = if horizontal { (t, fixed) } else { (fixed, t) };
+                let (x, y) = cam.raw_to_rect(u, v)?;
+                Some(if horizontal { (x, y) } else { (y, x) })
+            })
+            .collect()
+    };
+    let side = |pts: Vec<(f64, f64)>, fallback: f64| -> Side {
+        let (Some(first), Some(last)) = (pts.first(), pts.last()) else {
+            return Side::straight(0.0, 0.0, fallback as f32);
+        };
+        let (from, to) = (first.0.min(last.0), first.0.max(last.0));
+        let mut at = [fallback as f32; OUTLINE_POINTS];
+        for (k, a) in at.iter_mut().enumerate() {
+            let t = from + (to - from) * k as f64 / (OUTLINE_POINTS - 1) as f64;
+            // the nearest mapped point at or around t (1 px apart)
+            if let Some(p) = pts
+                .iter()
+                .min_by(|p, q| (p.0 - t).abs().total_cmp(&(q.0 - t).abs()))
+            {
+                *a = p.1 as f32;
+            }
+        }
+        Side {
+            from: from as f32,
+            to: to as f32,
+            at,
+        }
+    };
+    let (cw, ch) = (cam.width as f64, cam.height as f64);
+    fishtrack_core::track::ViewOutline {
+        top: side(edge(true, -0.5), 0.0),
+        bottom: side(edge(true, h - 0.5), ch),
+        left: side(edge(false, -0.5), 0.0),
+        right: side(edge(false, w - 0.5), cw),
+    }
+}
+
 /// Rectifies raw left/right frame pairs of one calibration with the core's
 /// fixed-point remap.
 #[derive(Debug, Clone)]
@@ -899,6 +1221,8 @@ pub struct Rectifier {
     pub right_map: FixedMap,
     /// The free scaling the rectification was computed with.
     pub alpha: f64,
+    /// The water fill of both views (canvas rectifications only).
+    pub water: Option<Box<[WaterFill; 2]>>,
 }
 
 impl Rectifier {
@@ -912,7 +1236,11 @@ impl Rectifier {
     /// Computes the rectification with `scaling` (see [`Scaling`]) and both
     /// remap tables.
     pub fn with_scaling(calib: &StereoCalib, scaling: Scaling) -> Self {
-        Self::with_alpha(calib, scaling.alpha(calib))
+        let alpha = scaling.alpha(calib);
+        if scaling == Scaling::Canvas {
+            return Self::with_rectification(calib, stereo_rectify_canvas(calib, alpha), alpha);
+        }
+        Self::with_alpha(calib, alpha)
     }
 
     /// Computes the rectification with OpenCV's free scaling `alpha` (see
@@ -920,13 +1248,30 @@ impl Rectifier {
     /// with no source show the raw image mirrored about its edge
     /// ([`Fill::Reflect101`]).
     pub fn with_alpha(calib: &StereoCalib, alpha: f64) -> Self {
-        let rect = stereo_rectify_alpha(calib, alpha);
+        Self::with_rectification(calib, stereo_rectify_alpha(calib, alpha), alpha)
+    }
+
+    /// The remap tables of `rect` (computed with the free scaling `alpha`).
+    fn with_rectification(calib: &StereoCalib, rect: Rectification, alpha: f64) -> Self {
         let (left, right) = RectifiedCamera::pair(calib, &rect);
         let (w, h) = (calib.width, calib.height);
-        let (left_map, right_map) = rayon::join(
-            || FixedMap::from_float_fill(&left.float_map(), RECTIFIER_FILL, w, h),
-            || FixedMap::from_float_fill(&right.float_map(), RECTIFIER_FILL, w, h),
+        let canvas = rect.outer.is_some();
+        let ((left_map, lw), (right_map, rw)) = rayon::join(
+            || {
+                let m = left.float_map();
+                let water = canvas.then(|| WaterFill::new(&m, w, h));
+                (FixedMap::from_float_fill(&m, RECTIFIER_FILL, w, h), water)
+            },
+            || {
+                let m = right.float_map();
+                let water = canvas.then(|| WaterFill::new(&m, w, h));
+                (FixedMap::from_float_fill(&m, RECTIFIER_FILL, w, h), water)
+            },
         );
+        let water = match (lw, rw) {
+            (Some(a), Some(b)) => Some(Box::new([a, b])),
+            _ => None,
+        };
         Rectifier {
             calib: calib.clone(),
             rect,
@@ -935,6 +1280,7 @@ impl Rectifier {
             left_map,
             right_map,
             alpha,
+            water,
         }
     }
 
@@ -943,7 +1289,7 @@ impl Rectifier {
     /// when `alpha ≠ 0`, the whole frame at `alpha = 0` (every pixel has a
     /// source by construction; OpenCV's rounding may drop the last row).
     pub fn valid_rois(&self) -> [fishtrack_core::Roi; 2] {
-        let (w, h) = (self.calib.width, self.calib.height);
+        let (w, h) = self.rect.size;
         let r = |v: [u32; 4]| {
             if self.alpha == 0.0 {
                 fishtrack_core::Roi::new(0, 0, w, h)
@@ -952,6 +1298,29 @@ impl Rectifier {
             }
         };
         [r(self.rect.roi1), r(self.rect.roi2)]
+    }
+
+    /// The left and right rectangles of the rectified frames that hold the
+    /// raw views: on a canvas ([`stereo_rectify_canvas`]) their outer
+    /// rectangles, else [`Rectifier::valid_rois`].
+    pub fn view_rois(&self) -> [fishtrack_core::Roi; 2] {
+        match self.rect.outer {
+            Some(o) => o.map(|v| fishtrack_core::Roi::new(v[0], v[1], v[2], v[3])),
+            None => self.valid_rois(),
+        }
+    }
+
+    /// The left and right raw views' borders on a canvas
+    /// ([`stereo_rectify_canvas`]; `None` for the other rectifications,
+    /// whose views are [`Rectifier::view_rois`]).
+    pub fn view_outlines(&self) -> Option<[fishtrack_core::track::ViewOutline; 2]> {
+        self.rect.outer?;
+        Some([outline(&self.left), outline(&self.right)])
+    }
+
+    /// The rectified frames' size `(width, height)`.
+    pub fn size(&self) -> (u32, u32) {
+        self.rect.size
     }
 
     /// Rectifies a raw frame pair (each must have the calibration's size).
@@ -965,7 +1334,12 @@ impl Rectifier {
             return Err(RemapError::SizeMismatch);
         }
         let (l, r) = rayon::join(|| self.left_map.apply(left), || self.right_map.apply(right));
-        Ok((l?, r?))
+        let (mut l, mut r) = (l?, r?);
+        if let Some(wf) = &self.water {
+            wf[0].apply(&mut l);
+            wf[1].apply(&mut r);
+        }
+        Ok((l, r))
     }
 }
 
@@ -1135,6 +1509,122 @@ mod tests {
         assert!(!wholly_inside_valid(&b, &b, &v, 2));
         let b2 = Roi::new(v[0].x.max(v[1].x) + 5, 50, 20, 10);
         assert!(wholly_inside_valid(&b2, &b2, &v, 2));
+    }
+
+    #[test]
+    fn canvas_keeps_every_raw_pixel_at_the_scale_of_its_alpha() {
+        for c in [rig(), {
+            // pincushion: the raw edges bow the other way
+            let mut c = rig();
+            c.d1 = vec![0.1, 0.0, 0.0, 0.0, 0.0];
+            c.d2 = vec![0.1, 0.0, 0.0, 0.0];
+            c
+        }] {
+            let a = stereo_rectify_alpha(&c, DEFAULT_ALPHA);
+            let r = stereo_rectify_canvas(&c, DEFAULT_ALPHA);
+            // same scale and rotations, principal points moved by whole pixels
+            assert_eq!((r.p1[(0, 0)], r.r1, r.r2), (a.p1[(0, 0)], a.r1, a.r2));
+            assert_eq!(r.p2[(0, 3)], a.p2[(0, 3)]);
+            for (p, q) in [(&r.p1, &a.p1), (&r.p2, &a.p2)] {
+                let (dx, dy) = (q[(0, 2)] - p[(0, 2)], q[(1, 2)] - p[(1, 2)]);
+                assert!(dx == dx.round() && dy == dy.round(), "{dx} {dy}");
+            }
+            assert_eq!((r.q[(0, 3)], r.q[(1, 3)]), (-r.p1[(0, 2)], -r.p1[(1, 2)]));
+            assert_eq!((r.q[(2, 3)], r.q[(3, 2)]), (a.q[(2, 3)], a.q[(3, 2)]));
+            let (w, h) = r.size;
+            assert!(w > c.width && h > c.height, "{:?}", r.size);
+            // every raw pixel of both cameras lands on the canvas, well inside
+            let (l, rr) = RectifiedCamera::pair(&c, &r);
+            assert_eq!((l.width, l.height, l.raw_width), (w, h, c.width));
+            for cam in [&l, &rr] {
+                for v in 0..c.height {
+                    for u in 0..c.width {
+                        let (x, y) = cam.raw_to_rect(u as f64, v as f64).unwrap();
+                        assert!(
+                            x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64,
+                            "({u}, {v}) -> ({x}, {y}) on {w} x {h}"
+                        );
+                    }
+                }
+            }
+            // the outer rectangles hold the views; the inner ones lie in them
+            let o = r.outer.unwrap();
+            for (k, cam) in [&l, &rr].into_iter().enumerate() {
+                let [ox, oy, ow, oh] = o[k];
+                let [ix, iy, iw, ih] = if k == 0 { r.roi1 } else { r.roi2 };
+                assert!(ix >= ox && iy >= oy && ix + iw <= ox + ow && iy + ih <= oy + oh);
+                // the outline follows the raw edges: their midpoints are on it
+                let ol = outline(cam);
+                let (x, y) = cam
+                    .raw_to_rect(-0.5, (c.height as f64 - 1.0) / 2.0)
+                    .unwrap();
+                assert!((ol.left.value(y as f32) - x as f32).abs() < 0.6);
+                let (x, y) = cam
+                    .raw_to_rect((c.width as f64 - 1.0) / 2.0, c.height as f64 - 0.5)
+                    .unwrap();
+                assert!((ol.bottom.value(x as f32) - y as f32).abs() < 0.6);
+            }
+            // a rectifier on the canvas maps boxes back into the raw frame
+            let rect = Rectifier::with_scaling(&c, Scaling::Canvas);
+            assert_eq!(rect.size(), (w, h));
+            assert!(rect.view_outlines().is_some());
+            assert!(Rectifier::new(&c).view_outlines().is_none());
+            let b = rect.left.raw_box(&fishtrack_core::Roi::new(0, 0, w, h));
+            assert!(
+                b[0] >= 0.0
+                    && b[1] >= 0.0
+                    && b[0] + b[2] <= c.width as f64
+                    && b[1] + b[3] <= c.height as f64,
+                "{b:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn water_fill_shows_water_not_the_mirrored_view() {
+        let c = rig();
+        let (w, h) = (c.width, c.height);
+        let rect = Rectifier::with_scaling(&c, Scaling::Canvas);
+        // water at 40 with noise of σ ≈ 2 and a bright fish at the raw left edge
+        let mut seed = 7u32;
+        let raw = GrayImage::from_fn(w, h, |x, y| {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            let n = (seed % 7) as i32 - 3;
+            let fish = x < 12 && (50..70).contains(&y);
+            image::Luma([if fish { 200 } else { (40 + n) as u8 }])
+        });
+        let (l, _) = rect.rectify_pair(&raw, &raw).unwrap();
+        let mirrored = rect.left_map.apply(&raw).unwrap();
+        let map = rect.left.float_map();
+        let (mut fill, mut sum, mut same) = (0usize, 0f64, 0usize);
+        for (i, p) in l.pixels().enumerate() {
+            let (sx, sy) = (map.map_x[i], map.map_y[i]);
+            let has_source = sx >= 0.0 && sy >= 0.0 && sx <= (w - 1) as f32 && sy <= (h - 1) as f32;
+            if has_source {
+                same += usize::from(p[0] == mirrored.as_raw()[i]);
+                continue;
+            }
+            fill += 1;
+            sum += p[0] as f64;
+            assert!(
+                p[0] < 60,
+                "the fish is mirrored into the fill at {i}: {}",
+                p[0]
+            );
+        }
+        // the sourced pixels are the remap's; the fill is water
+        assert_eq!(same, (l.width() * l.height()) as usize - fill);
+        assert!(fill > 1000, "{fill}");
+        let mean = sum / fill as f64;
+        assert!((mean - 40.0).abs() < 2.0, "{mean}");
+        // the mirror put the fish into the fill
+        assert!((0..mirrored.as_raw().len()).any(|i| {
+            let (sx, sy) = (map.map_x[i], map.map_y[i]);
+            !(sx >= 0.0 && sy >= 0.0 && sx <= (w - 1) as f32 && sy <= (h - 1) as f32)
+                && mirrored.as_raw()[i] > 100
+        }));
     }
 
     #[test]

@@ -73,10 +73,14 @@ pub struct Setup {
     pub params: Params,
     /// Rectified stereo geometry.
     pub geometry: StereoGeometry,
-    /// Frame width.
+    /// Rectified frame width (the pipeline's frames).
     pub width: u32,
-    /// Frame height.
+    /// Rectified frame height.
     pub height: u32,
+    /// Raw frame width (the calibration's).
+    pub raw_width: u32,
+    /// Raw frame height.
+    pub raw_height: u32,
     /// Column fixed-pattern offsets of the left and right cameras
     /// ([`crate::columns`]), taken out of every raw frame.
     pub columns: [Option<ColumnOffsets>; 2],
@@ -95,17 +99,21 @@ pub fn parse_tracker(s: &str) -> Result<Association, InputError> {
     }
 }
 
-/// Checks `--rect-alpha`: `auto` ([`Scaling::NoMagnification`]) or
+/// Checks `--rect-alpha`: `auto` ([`Scaling::NoMagnification`]), `canvas`
+/// ([`Scaling::Canvas`]) or
 /// OpenCV's free scaling in `[0, 1]`, or
 /// negative for its default scaling (taken as −1).
 pub fn parse_scaling(s: &str) -> Result<Scaling, InputError> {
     if s.trim().eq_ignore_ascii_case("auto") {
         return Ok(Scaling::NoMagnification);
     }
+    if s.trim().eq_ignore_ascii_case("canvas") {
+        return Ok(Scaling::Canvas);
+    }
     let a: f64 = s.trim().parse().map_err(|_| {
         InputError::plain(
             "--rect-alpha",
-            format!("`{s}` is neither `auto` nor a number"),
+            format!("`{s}` is neither `auto`, `canvas` nor a number"),
         )
     })?;
     check_alpha(a).map(Scaling::Alpha)
@@ -139,6 +147,7 @@ mod alpha_tests {
             super::parse_scaling("auto").unwrap(),
             Scaling::NoMagnification
         );
+        assert_eq!(super::parse_scaling(" Canvas").unwrap(), Scaling::Canvas);
         assert_eq!(super::parse_scaling(" 0.5").unwrap(), Scaling::Alpha(0.5));
         assert_eq!(super::parse_scaling("-2").unwrap(), Scaling::Alpha(-1.0));
         for bad in ["1.5", "fast", ""] {
@@ -180,6 +189,8 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
         )
     })?;
     let (width, height) = (calib.width, calib.height);
+    // pixel-valued parameters follow the raw frame's scale, which every
+    // rectification keeps to within a few per cent
     let mut params = match &opts.params {
         Some(p) => crate::params_file::load_params(p, width)?,
         None => Params::for_frame(width),
@@ -220,13 +231,16 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
             );
         }
     }
+    let (rect_width, rect_height) = rectifier.size();
     Ok(Setup {
         haul,
         rectifier,
         params,
         geometry,
-        width,
-        height,
+        width: rect_width,
+        height: rect_height,
+        raw_width: width,
+        raw_height: height,
         columns,
     })
 }
@@ -237,13 +251,18 @@ impl Setup {
         let mut cfg = PipelineConfig::new(self.params, self.geometry, self.width, self.height);
         cfg.valid = self.rectifier.valid_rois();
         // the tracker's frame border is the raw view's (TrackConfig::view)
-        cfg.track.view = cfg.valid;
+        cfg.track.view = self.rectifier.view_rois();
+        cfg.track.outline = self.rectifier.view_outlines();
+        // the cues' σ follow the raw views' scale, not a canvas's size
+        cfg.track.sigma_defaults = fishtrack_core::track::Sigmas::for_frame(self.raw_width);
         cfg
     }
 
     /// Loads one raw frame pair, the cameras' column offsets taken out.
     pub fn load_pair(&self, pair: &FramePair) -> Result<(GrayImage, GrayImage)> {
-        let (mut l, mut r) = self.haul.load_pair(pair, Some((self.width, self.height)))?;
+        let (mut l, mut r) = self
+            .haul
+            .load_pair(pair, Some((self.raw_width, self.raw_height)))?;
         for (img, c) in [&mut l, &mut r].into_iter().zip(&self.columns) {
             if let Some(c) = c {
                 c.apply(img);

@@ -317,6 +317,27 @@ fn single_frame_haul_is_valid() {
     let s2: serde_json::Value =
         serde_json::from_slice(&std::fs::read(o2.join("summary.json")).unwrap()).unwrap();
     assert!(s2["rectification"]["alpha"].as_f64().unwrap() >= 0.25);
+    // `--rect-alpha canvas`: frames larger than the raw ones, every box
+    // written in raw pixels inside the raw frame
+    let (out, o3) = track(&h, &["--rect-alpha", "canvas"]);
+    assert_ok(&out);
+    let s3: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(o3.join("summary.json")).unwrap()).unwrap();
+    assert!(s3["width"].as_u64().unwrap() > w, "{}", s3["width"]);
+    assert_eq!(s3["rectification"]["focal_px"], r["focal_px"]);
+    let raw = image::image_dimensions(h.join("left/000001.png")).unwrap();
+    for f in ["detections.csv", "tracks.csv"] {
+        for line in std::fs::read_to_string(o3.join(f)).unwrap().lines() {
+            let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+            assert!(
+                v[2] >= 0.0
+                    && v[3] >= 0.0
+                    && v[2] + v[4] <= raw.0 as f64 + 1e-9
+                    && v[3] + v[5] <= raw.1 as f64 + 1e-9,
+                "{f}: {line}"
+            );
+        }
+    }
 }
 
 /// A haul with no fish: `synth --fish-rate 0` (mesh, debris, snow, no fish)

@@ -668,6 +668,30 @@ fn raw_view_border_and_robust_depth_core_and_reference_agree() {
     assert!(core_equals_reference(cfg) > 0);
 }
 
+/// Curved view borders (`TrackConfig::outline`, a canvas rectification's
+/// raw edges: each side bowing in by up to 150 px) change border cuts,
+/// births and exits identically in core and reference, for all three
+/// association methods.
+#[test]
+fn curved_view_borders_core_and_reference_agree() {
+    use fishtrack_core::track::outline::{Side, OUTLINE_POINTS};
+    use fishtrack_core::track::ViewOutline;
+    let bow = |s: &mut Side, depth: f32| {
+        for (i, a) in s.at.iter_mut().enumerate() {
+            let t = i as f32 / (OUTLINE_POINTS - 1) as f32;
+            *a += depth * 4.0 * t * (1.0 - t);
+        }
+    };
+    let mut o = ViewOutline::rect(&Roi::new(20, 10, W - 40, W - 30));
+    bow(&mut o.left, 150.0);
+    bow(&mut o.right, -120.0);
+    bow(&mut o.top, 90.0);
+    bow(&mut o.bottom, -60.0);
+    let mut cfg = TrackConfig::for_frame(W, W);
+    cfg.outline = Some([o, o]);
+    assert!(core_equals_reference(cfg) > 0);
+}
+
 fn run_core_full(h: &Haul, assoc: Assoc) -> Vec<reference::track::Assignment> {
     run_core_full_cfg(h, assoc, TrackConfig::for_frame(W, W))
 }

@@ -119,6 +119,7 @@
 pub mod cost;
 pub mod greedy;
 pub mod observation;
+pub mod outline;
 pub mod sigma;
 pub mod viterbi;
 
@@ -126,6 +127,7 @@ use core::fmt;
 
 pub use cost::{Cues, Robust, Sigmas};
 pub use observation::{CameraView, Observation};
+pub use outline::ViewOutline;
 
 use crate::error::ParamError;
 use crate::image::Roi;
@@ -154,6 +156,11 @@ pub struct TrackConfig {
     /// cut there shows only part of its area although its box is far from
     /// the rectified frame's edge. Clipped to the frame.
     pub view: [Roi; 2],
+    /// The left and right raw views' borders when they are not the
+    /// rectangles `view` (a rectification onto a canvas that keeps every
+    /// raw pixel, [`outline`]): then they, not `view`, decide the border
+    /// cuts, births near the border and exits. Default `None`.
+    pub outline: Option<[ViewOutline; 2]>,
     /// Cues of the matching cost (Fig. 15 ablation). Default: all.
     pub cues: Cues,
     /// Cost of a lost frame (the predicted node's edge). Default 24.
@@ -236,20 +243,7 @@ pub const DEPTH_ROBUST: f32 = f32::INFINITY;
 /// The sides of box `b` within `k` pixels of the matching side of `view`
 /// or beyond it ([`cost::CUT_X_MIN`], …): where the view's border may cut it.
 pub fn cut_sides(b: &Roi, view: &Roi, k: u32) -> u8 {
-    let mut s = 0;
-    if b.x <= view.x.saturating_add(k) {
-        s |= cost::CUT_X_MIN;
-    }
-    if b.right().saturating_add(k) >= view.right() {
-        s |= cost::CUT_X_MAX;
-    }
-    if b.y <= view.y.saturating_add(k) {
-        s |= cost::CUT_Y_MIN;
-    }
-    if b.bottom().saturating_add(k) >= view.bottom() {
-        s |= cost::CUT_Y_MAX;
-    }
-    s
+    ViewOutline::rect(view).cut_sides(b, k)
 }
 
 /// True when `b` comes within `k` pixels of an edge of `view` or crosses it
@@ -265,12 +259,20 @@ impl TrackConfig {
         [self.view[0].intersect(&f), self.view[1].intersect(&f)]
     }
 
+    /// The views' borders: [`TrackConfig::outline`], else the rectangles
+    /// of [`TrackConfig::views`].
+    pub fn outlines(&self) -> [ViewOutline; 2] {
+        self.outline
+            .unwrap_or_else(|| self.views().map(|v| ViewOutline::rect(&v)))
+    }
+
     /// Defaults for a `width × height` rectified frame.
     pub fn for_frame(width: u32, height: u32) -> TrackConfig {
         TrackConfig {
             width,
             height,
             view: [Roi::full(width, height); 2],
+            outline: None,
             cues: Cues::ALL,
             miss_cost: 24.0,
             share_cost: 24.0,
@@ -305,6 +307,20 @@ impl TrackConfig {
         {
             return Err(TrackError::Config(
                 "view: a non-empty rectangle inside the frame",
+            ));
+        }
+        let finite_side = |s: &outline::Side| {
+            s.from.is_finite()
+                && s.to.is_finite()
+                && s.from <= s.to
+                && s.at.iter().all(|v| v.is_finite())
+        };
+        if self.outline.is_some_and(|o| {
+            !o.iter()
+                .all(|v| [v.top, v.bottom, v.left, v.right].iter().all(finite_side))
+        }) {
+            return Err(TrackError::Config(
+                "outline: finite sides, each spanning from ≤ to",
             ));
         }
         if !self.share_cost.is_finite() || self.share_cost < 0.0 {
@@ -894,7 +910,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         for t in self.taken.iter_mut() {
             *t = false;
         }
-        let [vl, vr] = self.cfg.views();
+        let [vl, vr] = self.cfg.outlines();
         for (i, o) in observations.iter().enumerate() {
             if i >= N {
                 self.stats.obs_dropped = self.stats.obs_dropped.saturating_add(1);
@@ -904,7 +920,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 self.stats.obs_invalid = self.stats.obs_invalid.saturating_add(1);
                 continue;
             }
-            let view = |v: &CameraView, r: &Roi| {
+            let view = |v: &CameraView, r: &ViewOutline| {
                 let bbox = [
                     v.bbox.x as f32,
                     v.bbox.y as f32,
@@ -918,7 +934,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                     && v.cx <= bbox[2]
                     && v.cy >= bbox[1]
                     && v.cy <= bbox[3];
-                let sides = cut_sides(&v.bbox, r, 2);
+                let sides = r.cut_sides(&v.bbox, 2);
                 ViewFeat {
                     pos: [v.cx, v.cy],
                     area: v.area as f32,
@@ -1174,7 +1190,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
     /// including cut views near a target exiting this step; then the
     /// targets closed this step are removed.
     fn births(&mut self, frame: u32, params: &Params, first_frame: bool, sv2: f32) {
-        let (vl, m) = (self.cfg.views()[0], params.margin);
+        let (vl, m) = (self.cfg.outlines()[0], params.margin);
         let cut_aware = self.cfg.cut_aware_motion;
         let big = self.cfg.birth_area_factor * params.area_min as f32;
         let gate = self.cfg.lost_gate;
@@ -1199,7 +1215,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
             if self.taken.get(c.obs as usize).copied().unwrap_or(true) {
                 continue;
             }
-            let near_border = m > 0 && near_edge(&c.bbox, &vl, m - 1);
+            let near_border = m > 0 && vl.cut_sides(&c.bbox, m - 1) != 0;
             if !first_frame && !near_border && (c.area as f32) < big {
                 continue;
             }
@@ -1306,11 +1322,7 @@ fn advance<const D: usize, const K: usize, const H: usize, const N: usize>(
     if let (Some(s), true) = (states.get(bi), lost_now) {
         if s.vel_known {
             let p = s.left.pos;
-            let m = params.margin as f32;
-            let v = cfg.views()[0];
-            let (x0, y0) = (v.x as f32 + m, v.y as f32 + m);
-            let (x1, y1) = (v.right() as f32 - m, v.bottom() as f32 - m);
-            if !(p[0] >= x0 && p[0] < x1 && p[1] >= y0 && p[1] < y1) {
+            if !cfg.outlines()[0].holds(p, params.margin as f32) {
                 t.pending = Some(CloseReason::Exit);
                 return;
             }

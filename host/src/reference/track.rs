@@ -370,6 +370,78 @@ fn cam_cost(f: &Feat, k: &Costs, first: bool) -> f64 {
         .sum()
 }
 
+/// A view's border as four polylines (`fishtrack_core::track::ViewOutline`
+/// in `f64`): per side, the span along it and the coordinate across it at
+/// evenly spaced samples, linear between them, constant beyond.
+struct Outline {
+    /// top, bottom, left, right: (from, to, samples).
+    sides: [(f64, f64, Vec<f64>); 4],
+}
+
+impl Outline {
+    fn from_core(o: fishtrack_core::track::ViewOutline) -> Self {
+        let side = |s: &fishtrack_core::track::outline::Side| {
+            (
+                s.from as f64,
+                s.to as f64,
+                s.at.iter().map(|&v| v as f64).collect(),
+            )
+        };
+        Outline {
+            sides: [side(&o.top), side(&o.bottom), side(&o.left), side(&o.right)],
+        }
+    }
+
+    /// Side `i`'s coordinate at position `t` along it.
+    fn at(&self, i: usize, t: f64) -> f64 {
+        let (from, to, v) = &self.sides[i];
+        let n = v.len() - 1;
+        if to <= from {
+            return v[0];
+        }
+        let u = ((t - from) / (to - from)).clamp(0.0, 1.0) * n as f64;
+        let k = (u.floor() as usize).min(n - 1);
+        v[k] + (u - k as f64) * (v[k + 1] - v[k])
+    }
+
+    /// Side `i`'s greatest (`max`) or least coordinate over `a..=b`.
+    fn extreme(&self, i: usize, a: f64, b: f64, max: bool) -> f64 {
+        let (from, to, v) = &self.sides[i];
+        let n = v.len() - 1;
+        let mut out = vec![self.at(i, a), self.at(i, b)];
+        for (k, &x) in v.iter().enumerate() {
+            let t = from + (to - from) * k as f64 / n as f64;
+            if t > a && t < b {
+                out.push(x);
+            }
+        }
+        let f = if max { f64::max } else { f64::min };
+        out.into_iter().reduce(f).unwrap_or(0.0)
+    }
+
+    /// Cut sides of box (x0, y0, x1, y1) within `k` px: [x-, y-], [x+, y+].
+    fn cut(&self, (x0, y0, x1, y1): (f64, f64, f64, f64), k: f64) -> ([bool; 2], [bool; 2]) {
+        (
+            [
+                x0 <= self.extreme(2, y0, y1, true) + k,
+                y0 <= self.extreme(0, x0, x1, true) + k,
+            ],
+            [
+                x1 + k >= self.extreme(3, y0, y1, false),
+                y1 + k >= self.extreme(1, x0, x1, false),
+            ],
+        )
+    }
+
+    /// Point `q` at least `m` px inside.
+    fn holds(&self, q: [f64; 2], m: f64) -> bool {
+        q[0] >= self.at(2, q[1]) + m
+            && q[0] < self.at(3, q[1]) - m
+            && q[1] >= self.at(0, q[0]) + m
+            && q[1] < self.at(1, q[0]) - m
+    }
+}
+
 /// Stereo edge: (cost, left features, right features).
 fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
     let first = !p.vel_known;
@@ -428,19 +500,38 @@ pub fn run(
         (x0, y0, x1, y1)
     };
     let views = [rect(&cfg.view[0]), rect(&cfg.view[1])];
+    // With an outline (curved borders on a canvas): per side, the border's
+    // least and greatest coordinate over a span along it.
+    let outlines = cfg.outline.map(|o| o.map(Outline::from_core));
+    // Which sides of box (x0, y0, x1, y1) lie within k px of the border of
+    // view `cam` or beyond it: [x-, y-], [x+, y+].
+    let cut_of = |cam: usize, (x0, y0, x1, y1): (u64, u64, u64, u64), k: u64| match &outlines {
+        Some(o) => o[cam].cut((x0 as f64, y0 as f64, x1 as f64, y1 as f64), k as f64),
+        None => {
+            let (vx0, vy0, vx1, vy1) = views[cam];
+            (
+                [x0 <= vx0 + k, y0 <= vy0 + k],
+                [x1 + k >= vx1, y1 + k >= vy1],
+            )
+        }
+    };
 
     for (fi, obs) in frames.iter().enumerate() {
         let frame = fi as u32;
         // A box within 2 px of its view's edge (or across it) may be cut.
         let view = |v: &fishtrack_core::track::CameraView, cam: usize| {
             let b = &v.bbox;
-            let (vx0, vy0, vx1, vy1) = views[cam];
             // per side: within 2 px of the view's side or across it
-            let lo = [b.x as u64 <= vx0 + 2, b.y as u64 <= vy0 + 2];
-            let hi = [
-                b.x as u64 + b.w as u64 + 2 >= vx1,
-                b.y as u64 + b.h as u64 + 2 >= vy1,
-            ];
+            let (lo, hi) = cut_of(
+                cam,
+                (
+                    b.x as u64,
+                    b.y as u64,
+                    b.x as u64 + b.w as u64,
+                    b.y as u64 + b.h as u64,
+                ),
+                2,
+            );
             // which end of the fish is seen: none for a box that is empty
             // or misses the centroid
             let ok = sane_box(v);
@@ -731,9 +822,15 @@ pub fn run(
             t.front = new.into_iter().map(|x| x.0).collect();
             if best.vel_known && new_best_lost {
                 let q = best.left.pos;
-                let (vx0, vy0, vx1, vy1) = views[0];
-                let (vx0, vy0, vx1, vy1) = (vx0 as f64, vy0 as f64, vx1 as f64, vy1 as f64);
-                if !(q[0] >= vx0 + m && q[0] < vx1 - m && q[1] >= vy0 + m && q[1] < vy1 - m) {
+                let inside = match &outlines {
+                    Some(o) => o[0].holds(q, m),
+                    None => {
+                        let (vx0, vy0, vx1, vy1) = views[0];
+                        let (vx0, vy0, vx1, vy1) = (vx0 as f64, vy0 as f64, vx1 as f64, vy1 as f64);
+                        q[0] >= vx0 + m && q[0] < vx1 - m && q[1] >= vy0 + m && q[1] < vy1 - m
+                    }
+                };
+                if !inside {
                     t.pending = true;
                     t.exit = true;
                 }
@@ -814,9 +911,12 @@ pub fn run(
                 continue;
             }
             let (x0, y0, x1, y1) = c.bbox;
-            let (vx0, vy0, vx1, vy1) = views[0];
             let (mu, x0, y0, x1, y1) = (mu as u64, x0 as u64, y0 as u64, x1 as u64, y1 as u64);
-            let near = x0 < vx0 + mu || y0 < vy0 + mu || x1 + mu > vx1 || y1 + mu > vy1;
+            // within mu − 1 px of the border (integer boxes: closer than mu)
+            let near = mu > 0 && {
+                let (lo, hi) = cut_of(0, (x0, y0, x1, y1), mu - 1);
+                lo.iter().chain(&hi).any(|&c| c)
+            };
             // In the first frame every fish is already inside the view.
             if fi > 0 && !near && c.area < big {
                 continue;
