@@ -975,9 +975,12 @@ pub struct WaterFill {
     width: usize,
     /// Pixels (row-major indices) with no raw source, with their cell.
     invalid: Vec<(u32, u32)>,
-    /// Valid pixels near the fill, with their cell.
+    /// Valid pixels near the fill, with their cell's slot (the cells that
+    /// hold band pixels, numbered densely: one histogram each per frame).
     band: Vec<(u32, u32)>,
-    /// Per cell, the cell whose band median it takes (`u32::MAX`: the
+    /// Slots in use.
+    slots: usize,
+    /// Per cell, the slot whose band median it takes (`u32::MAX`: the
     /// whole band's).
     source_cell: Vec<u32>,
     cells: usize,
@@ -1042,6 +1045,18 @@ impl WaterFill {
                 has[cell(i) as usize] = true;
             }
         }
+        // dense slots for the cells that have band pixels
+        let mut slot = vec![u32::MAX; cw * ch];
+        let mut slots = 0usize;
+        for (c, &hc) in has.iter().enumerate() {
+            if hc {
+                slot[c] = slots as u32;
+                slots += 1;
+            }
+        }
+        for b in band.iter_mut() {
+            b.1 = slot[b.1 as usize];
+        }
         let source_cell = (0..cw * ch)
             .map(|c| {
                 let (cx, cy) = ((c % cw) as i64, (c / cw) as i64);
@@ -1056,13 +1071,14 @@ impl WaterFill {
                         best = Some((d, k as u32));
                     }
                 }
-                best.map_or(u32::MAX, |b| b.1)
+                best.map_or(u32::MAX, |b| slot[b.1 as usize])
             })
             .collect();
         WaterFill {
             width: w,
             invalid,
             band,
+            slots,
             source_cell,
             cells: cw * ch,
             cells_x: cw,
@@ -1075,7 +1091,7 @@ impl WaterFill {
             return;
         }
         let buf: &mut [u8] = img;
-        let mut hist = vec![[0u32; 256]; self.cells];
+        let mut hist = vec![[0u32; 256]; self.slots];
         let mut all = [0u32; 256];
         for &(i, c) in &self.band {
             let v = buf[i as usize] as usize;
