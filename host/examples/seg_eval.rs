@@ -7,7 +7,7 @@
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
 //!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
-//!     [--alpha A|auto] [--split | --no-split] [--no-dim] [--out DIR] HAUL...
+//!     [--alpha A|auto|canvas] [--split | --no-split] [--no-dim] [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
 //! gradient with one global threshold, literal θ_V, no elongation test, no

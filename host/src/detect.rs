@@ -23,7 +23,7 @@ use fishtrack_core::segment::{segment_frame, workspace_size, RECOMMENDED_MAX_ROI
 use crate::calib::StereoCalib;
 use crate::haul::Haul;
 use crate::output::{write_detections, DetectionRow};
-use crate::rectify::{in_raw_view, FixedMap, RectifiedCamera, Rectifier, Scaling};
+use crate::rectify::{in_raw_view, RectifiedCamera, Rectifier, Scaling};
 
 /// Object capacity per frame (issue 4's recommended `Objects<64, 16384>`).
 pub const MAX_OBJECTS: usize = 64;
@@ -94,17 +94,17 @@ pub fn detect_haul_scaling(
 ) -> Result<DetectSummary> {
     let haul = Haul::open(haul_dir)?;
     let calib = load_calibration(&haul)?;
-    let (w, h) = (calib.width as usize, calib.height as usize);
     let rect = Rectifier::with_scaling(&calib, scaling);
-    let left_map: &FixedMap = &rect.left_map;
+    // the rectified frames' size (a canvas is larger than the raw frame)
+    let (w, h) = (rect.size().0 as usize, rect.size().1 as usize);
     let mut ws = vec![0u8; workspace_size(w, h, RECOMMENDED_MAX_ROI_PIXELS)];
     let mut objs: Box<Objects<MAX_OBJECTS, MAX_RUNS>> = Box::default();
     let mut rows = Vec::new();
     let mut sum = DetectSummary::default();
     for pair in &haul.frames {
         let (left, _) = haul.load_pair(pair, Some((calib.width, calib.height)))?;
-        let rl = left_map
-            .apply(&left)
+        let rl = rect
+            .rectify_left(&left)
             .with_context(|| format!("rectifying frame {}", pair.index))?;
         let view = ImageView::packed(rl.as_raw(), w, h)
             .map_err(|e| anyhow::anyhow!("frame {}: {e}", pair.index))?;

@@ -973,8 +973,9 @@ impl Fill {
 #[derive(Debug, Clone)]
 pub struct WaterFill {
     width: usize,
-    /// Pixels (row-major indices) with no raw source, with their cell.
-    invalid: Vec<(u32, u32)>,
+    height: usize,
+    /// Pixels (row-major indices) with no raw source.
+    invalid: Vec<u32>,
     /// Valid pixels near the fill, with their cell's slot (the cells that
     /// hold band pixels, numbered densely: one histogram each per frame).
     band: Vec<(u32, u32)>,
@@ -1039,7 +1040,7 @@ impl WaterFill {
         let mut has = vec![false; cw * ch];
         for i in 0..w * h {
             if bad[i] {
-                invalid.push((i as u32, cell(i)));
+                invalid.push(i as u32);
             } else if near[i] {
                 band.push((i as u32, cell(i)));
                 has[cell(i) as usize] = true;
@@ -1076,6 +1077,7 @@ impl WaterFill {
             .collect();
         WaterFill {
             width: w,
+            height: h,
             invalid,
             band,
             slots,
@@ -1087,7 +1089,8 @@ impl WaterFill {
 
     /// Overwrites the fill of a rectified frame with the water level.
     pub fn apply(&self, img: &mut GrayImage) {
-        if self.invalid.is_empty() || img.width() as usize != self.width {
+        let size = (img.width() as usize, img.height() as usize);
+        if self.invalid.is_empty() || size != (self.width, self.height) {
             return;
         }
         let buf: &mut [u8] = img;
@@ -1140,7 +1143,7 @@ impl WaterFill {
         let (cw, ch) = (self.cells_x, self.cells / self.cells_x.max(1));
         let at = |x: usize, y: usize| level[y.min(ch - 1) * cw + x.min(cw - 1)];
         let half = Self::CELL as f32 / 2.0;
-        for &(i, _) in &self.invalid {
+        for &i in &self.invalid {
             let (px, py) = (
                 (i as usize % self.width) as f32,
                 (i as usize / self.width) as f32,
@@ -1183,8 +1186,15 @@ pub fn outline(cam: &RectifiedCamera) -> fishtrack_core::track::ViewOutline {
             .filter_map(|i| {
                 let t = i as f64 - 0.5;
                 let (u, v) = if horizontal { (t, fixed) } else { (fixed, t) };
+                // the edge in pixel-centre coordinates, + ½: the outline's
+                // sides are the first row / column inside (top, left) and
+                // the first outside (bottom, right), as `ViewOutline::rect`
                 let (x, y) = cam.raw_to_rect(u, v)?;
-                Some(if horizontal { (x, y) } else { (y, x) })
+                Some(if horizontal {
+                    (x, y + 0.5)
+                } else {
+                    (y, x + 0.5)
+                })
             })
             .collect()
     };
@@ -1337,6 +1347,19 @@ impl Rectifier {
     /// The rectified frames' size `(width, height)`.
     pub fn size(&self) -> (u32, u32) {
         self.rect.size
+    }
+
+    /// Rectifies a raw left frame (of the calibration's size), the water
+    /// fill included: what the segmentation of the left view sees.
+    pub fn rectify_left(&self, left: &GrayImage) -> Result<GrayImage, RemapError> {
+        if left.dimensions() != (self.calib.width, self.calib.height) {
+            return Err(RemapError::SizeMismatch);
+        }
+        let mut l = self.left_map.apply(left)?;
+        if let Some(wf) = &self.water {
+            wf[0].apply(&mut l);
+        }
+        Ok(l)
     }
 
     /// Rectifies a raw frame pair (each must have the calibration's size).
@@ -1574,11 +1597,12 @@ mod tests {
                 let (x, y) = cam
                     .raw_to_rect(-0.5, (c.height as f64 - 1.0) / 2.0)
                     .unwrap();
-                assert!((ol.left.value(y as f32) - x as f32).abs() < 0.6);
+                // (+ ½: the first column inside, the first row outside)
+                assert!((ol.left.value(y as f32) - (x + 0.5) as f32).abs() < 0.4);
                 let (x, y) = cam
                     .raw_to_rect((c.width as f64 - 1.0) / 2.0, c.height as f64 - 0.5)
                     .unwrap();
-                assert!((ol.bottom.value(x as f32) - y as f32).abs() < 0.6);
+                assert!((ol.bottom.value(x as f32) - (y + 0.5) as f32).abs() < 0.4);
             }
             // a rectifier on the canvas maps boxes back into the raw frame
             let rect = Rectifier::with_scaling(&c, Scaling::Canvas);
