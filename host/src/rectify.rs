@@ -1101,43 +1101,31 @@ impl WaterFill {
             hist[c as usize][v] += 1;
             all[v] += 1;
         }
-        // median and 1.4826·MAD of a histogram
-        let level_sigma = |h: &[u32; 256]| -> (f32, f32) {
+        // the median of a histogram (0 when empty)
+        let median = |h: &[u32; 256]| -> f32 {
             let n: u32 = h.iter().sum();
-            let rank = |h: &[u32; 256], n: u32| -> usize {
-                let mut acc = 0;
-                for (v, &k) in h.iter().enumerate() {
-                    acc += k;
-                    if 2 * acc >= n {
-                        return v;
-                    }
-                }
-                0
-            };
-            if n == 0 {
-                return (0.0, 0.0);
-            }
-            let m = rank(h, n);
-            let mut dev = [0u32; 256];
+            let mut acc = 0;
             for (v, &k) in h.iter().enumerate() {
-                dev[v.abs_diff(m)] += k;
+                acc += k;
+                if 2 * acc >= n && n > 0 {
+                    return v as f32;
+                }
             }
-            (m as f32, 1.4826 * rank(&dev, n) as f32)
+            0.0
         };
-        let global = level_sigma(&all);
         // one noise σ for the whole fill, the frame's own (the core's
         // estimate, on the frame as remapped: the strands of the mesh and
         // the cells' level differences inflate the band's spread), levels
         // per cell interpolated bilinearly between cell centres (no steps
         // at the cells' edges)
-        let s = fishtrack_core::ImageView::packed(buf, self.width, buf.len() / self.width)
-            .map_or(global.1, |v| {
-                fishtrack_core::noise::noise_sigma16(v) as f32 / 16.0
-            });
+        let s = fishtrack_core::ImageView::packed(buf, self.width, self.height).map_or(0.0, |v| {
+            fishtrack_core::noise::noise_sigma16(v) as f32 / 16.0
+        });
+        let global = median(&all);
         let level: Vec<f32> = (0..self.cells)
             .map(|c| match self.source_cell[c] {
-                u32::MAX => global.0,
-                k => level_sigma(&hist[k as usize]).0,
+                u32::MAX => global,
+                k => median(&hist[k as usize]),
             })
             .collect();
         let (cw, ch) = (self.cells_x, self.cells / self.cells_x.max(1));
@@ -1282,18 +1270,13 @@ impl Rectifier {
         let (left, right) = RectifiedCamera::pair(calib, &rect);
         let (w, h) = (calib.width, calib.height);
         let canvas = rect.outer.is_some();
-        let ((left_map, lw), (right_map, rw)) = rayon::join(
-            || {
-                let m = left.float_map();
-                let water = canvas.then(|| WaterFill::new(&m, w, h));
-                (FixedMap::from_float_fill(&m, RECTIFIER_FILL, w, h), water)
-            },
-            || {
-                let m = right.float_map();
-                let water = canvas.then(|| WaterFill::new(&m, w, h));
-                (FixedMap::from_float_fill(&m, RECTIFIER_FILL, w, h), water)
-            },
-        );
+        // a camera's fixed-point table and, on a canvas, its water fill
+        let tables = |cam: &RectifiedCamera| {
+            let m = cam.float_map();
+            let water = canvas.then(|| WaterFill::new(&m, w, h));
+            (FixedMap::from_float_fill(&m, RECTIFIER_FILL, w, h), water)
+        };
+        let ((left_map, lw), (right_map, rw)) = rayon::join(|| tables(&left), || tables(&right));
         let water = match (lw, rw) {
             (Some(a), Some(b)) => Some(Box::new([a, b])),
             _ => None,
