@@ -972,7 +972,7 @@ mod tests {
         assert!(n <= 512 * 1024, "{n}");
     }
 
-    /// Replays track events through `handle` with a 4-frame history in
+    /// Replays track events through `handle` with an 8-frame history in
     /// which every frame holds `boxes[frame]` as observation 0.
     fn replay(
         events: &[TrackEvent<'_>],
@@ -1076,10 +1076,11 @@ mod tests {
             out,
             [(1, Some(0), a), (2, None, Roi::new(300, 200, 50, 20))]
         );
-        // more lost frames than MAX_PENDING: the oldest go out predicted
+        // more lost frames than MAX_PENDING: the oldest go out predicted.
+        // The fish moves 10 px a frame; the predictions are 500 px ahead.
         let mut ev = std::vec![step(1, Some(0), 125, 110)];
         for f in 2..(MAX_PENDING as u32 + 4) {
-            ev.push(step(f, None, 115 + 10 * f as i16, 110));
+            ev.push(step(f, None, 615 + 10 * f as i16, 110));
         }
         let end = MAX_PENDING as u32 + 4;
         ev.push(step(end, Some(0), 115 + 10 * end as i16, 110));
@@ -1087,9 +1088,11 @@ mod tests {
         let out = replay(&ev, &[(1, a), (end, b)]);
         assert_eq!(out.len(), end as usize);
         assert!(out.windows(2).all(|w| w[0].0 < w[1].0), "frames in order");
-        // the prediction here is on the line, so both ways agree
         for (f, _, bx) in &out[1..out.len() - 1] {
-            assert_eq!(bx.x, 90 + 10 * f, "frame {f}");
+            // frames 2 and 3 overflowed the buffer: the predicted box;
+            // the rest waited for frame `end`: on the line between
+            let want = if *f <= 3 { 590 } else { 90 } + 10 * f;
+            assert_eq!(bx.x, want, "frame {f}");
         }
     }
 
