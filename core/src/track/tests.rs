@@ -654,3 +654,58 @@ fn a_fish_leaving_cut_by_the_border_is_not_a_new_fish() {
         }
     }
 }
+
+#[test]
+fn a_newborn_lost_on_its_first_step_does_not_block_another_fish() {
+    // Frame 1: fish A enters at the right border and is born. Frame 2: A is
+    // not seen; fish B (other grey levels, so A's edge to it is gated out)
+    // swims 350 px beside A's first-step guess x = 1900 − 476 (v_init).
+    // Within `lost_gate` of an established target's prediction B would be
+    // that target's partly hidden view, but A has no velocity: B is born in
+    // frame 2 and keeps its id in frame 3. With `newborn_lost_gate` =
+    // `lost_gate` (the former rule) B is blocked in frame 2.
+    let frames = std::vec![
+        Vec::new(),
+        std::vec![fish(1900.0, 1000.0, 200.0, 9, 1800.0, 0)],
+        std::vec![fish(1774.0, 1000.0, 400.0, 1, 1800.0, 0)],
+        std::vec![fish(1324.0, 1000.0, 400.0, 1, 1800.0, 0)],
+        Vec::new(),
+    ];
+    for (newborn_gate, blocked) in [
+        (TrackConfig::for_frame(W, W).newborn_lost_gate, false),
+        (6.0, true),
+    ] {
+        for assoc in [Assoc::Viterbi, Assoc::Mc] {
+            let cfg = TrackConfig {
+                newborn_lost_gate: newborn_gate,
+                ..TrackConfig::for_frame(W, W)
+            };
+            let mut tr: DefaultTracker = Tracker::new(cfg).unwrap();
+            let p = Params {
+                tracker: assoc,
+                ..Params::for_frame(W)
+            };
+            let mut log = Log::default();
+            {
+                let mut sink = log.sink();
+                for (f, obs) in frames.iter().enumerate() {
+                    tr.step(f as u32, obs, &p, &mut sink).unwrap();
+                }
+                tr.finish(&mut sink);
+            }
+            let a = log.ids_of(1, 0);
+            assert_eq!(a.len(), 1, "{assoc:?}: {:?}", log.frames);
+            let (b2, b3) = (log.ids_of(2, 0), log.ids_of(3, 0));
+            assert!(
+                !b3.is_empty() && !b3.contains(&a[0]),
+                "{assoc:?}: {:?}",
+                log.frames
+            );
+            if blocked {
+                assert!(b2.is_empty(), "{assoc:?}: {:?}", log.frames);
+            } else {
+                assert_eq!(b2, b3, "{assoc:?}: {:?}", log.frames);
+            }
+        }
+    }
+}

@@ -900,7 +900,12 @@ pub fn run(
                     });
                     t.front.get(b).is_some_and(|s| {
                         let [dx, dy] = displacement(&s.left, &c.left, k.cut_aware);
-                        s.lost > 0 && (dx * dx + dy * dy) / k.s[0] < cfg.lost_gate as f64
+                        let gate = if s.vel_known {
+                            cfg.lost_gate
+                        } else {
+                            cfg.newborn_lost_gate
+                        };
+                        s.lost > 0 && (dx * dx + dy * dy) / k.s[0] < gate as f64
                     })
                 })
             })
