@@ -557,6 +557,32 @@ fn fig15_cue_ablation() {
     println!("Fig. 15 (viterbi success, cue removed): {line}");
 }
 
+/// Core and reference agree on scene `what`: identical assignments, or
+/// identical up to the first near tie the reference met (two nodes of one
+/// target within `reference::track::NEAR_TIE_REL` of each other, which
+/// `f32` and `f64` may order differently; see `Traced`) less the trellis
+/// depth. Returns whether the scene diverged after such a tie.
+fn assert_core_matches_reference(
+    core: &[reference::track::Assignment],
+    r: &reference::track::Traced,
+    what: &str,
+) -> bool {
+    let rep = reference::track::compare(core, &r.assignments);
+    let depth = reference::track::Capacities::DEFAULT.depth as u32;
+    assert!(
+        r.agrees_up_to_near_ties(core, depth),
+        "{what}: {rep:?}, first near tie {:?}",
+        r.first_near_tie
+    );
+    if !rep.identical() {
+        println!(
+            "{what}: diverged after the near tie of frame {:?}",
+            r.first_near_tie
+        );
+    }
+    !rep.identical()
+}
+
 #[test]
 fn core_and_reference_assign_identically() {
     let mut total = 0usize;
@@ -569,11 +595,14 @@ fn core_and_reference_assign_identically() {
                 tracker: a,
                 ..Params::for_frame(W)
             };
-            let r =
-                reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
+            let r = reference::track::run_traced(
+                &h.frames,
+                &p,
+                &cfg,
+                reference::track::Capacities::DEFAULT,
+            );
             let core_full = run_core_full(&h, a);
-            let rep = reference::track::compare(&core_full, &r);
-            assert!(rep.identical(), "seed {seed} {a:?}: {rep:?}");
+            assert_core_matches_reference(&core_full, &r, &format!("seed {seed} {a:?}"));
             total += core.len();
         }
     }
@@ -595,10 +624,14 @@ fn robust_appearance_core_and_reference_agree() {
             tracker: Assoc::Viterbi,
             ..Params::for_frame(W)
         };
-        let r = reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
+        let r = reference::track::run_traced(
+            &h.frames,
+            &p,
+            &cfg,
+            reference::track::Capacities::DEFAULT,
+        );
         let core = run_core_full_cfg(&h, Assoc::Viterbi, cfg);
-        let rep = reference::track::compare(&core, &r);
-        assert!(rep.identical(), "seed {seed}: {rep:?}");
+        assert_core_matches_reference(&core, &r, &format!("seed {seed}"));
         let plain = run_core_full(&h, Assoc::Viterbi);
         differ_from_default += reference::track::compare(&core, &plain).differing;
     }
@@ -640,11 +673,14 @@ fn core_equals_reference(cfg: TrackConfig) -> usize {
                 tracker: a,
                 ..Params::for_frame(W)
             };
-            let r =
-                reference::track::run(&h.frames, &p, &cfg, reference::track::Capacities::DEFAULT);
+            let r = reference::track::run_traced(
+                &h.frames,
+                &p,
+                &cfg,
+                reference::track::Capacities::DEFAULT,
+            );
             let core = run_core_full_cfg(&h, a, cfg);
-            let rep = reference::track::compare(&core, &r);
-            assert!(rep.identical(), "seed {seed} {a:?}: {rep:?}");
+            assert_core_matches_reference(&core, &r, &format!("seed {seed} {a:?}"));
             differ_from_default +=
                 reference::track::compare(&core, &run_core_full(&h, a)).differing;
         }
@@ -740,15 +776,23 @@ fn fold_shared_removes_only_duplicated_tracks() {
         ..Params::for_frame(W)
     };
     let mut folded = 0usize;
+    let mut tie_scenes = 0usize;
     for seed in 0..SEEDS {
         let h0 = simulate(seed, FRAMES);
         for h in [thin(&h0), h0] {
             let a_off = run_core_full_cfg(&h, Assoc::Viterbi, off);
             let a_on = run_core_full_cfg(&h, Assoc::Viterbi, on);
-            let r_on =
-                reference::track::run(&h.frames, &p, &on, reference::track::Capacities::DEFAULT);
-            let rep = reference::track::compare(&a_on, &r_on);
-            assert!(rep.identical(), "seed {seed}: {rep:?}");
+            let r_on = reference::track::run_traced(
+                &h.frames,
+                &p,
+                &on,
+                reference::track::Capacities::DEFAULT,
+            );
+            if assert_core_matches_reference(&a_on, &r_on, &format!("seed {seed}")) {
+                // Folding is checked on scenes the two agree on.
+                tie_scenes += 1;
+                continue;
+            }
             let set_on: BTreeSet<_> = a_on.iter().copied().collect();
             let kept: BTreeSet<u32> = a_on.iter().map(|a| a.track).collect();
             let removed: BTreeSet<u32> = a_off
@@ -778,7 +822,13 @@ fn fold_shared_removes_only_duplicated_tracks() {
             folded += removed.len();
         }
     }
-    println!("fold_shared: {folded} tracks folded over {SEEDS} seeds at 5 and 2.5 fps");
+    println!(
+        "fold_shared: {folded} tracks folded over {SEEDS} seeds at 5 and 2.5 fps ({tie_scenes} scenes diverged after a near tie)"
+    );
+    assert!(
+        tie_scenes <= 2,
+        "{tie_scenes} scenes diverged after near ties"
+    );
     assert!(
         folded > 0,
         "no track folded: the test does not exercise the rule"
