@@ -182,12 +182,18 @@ pub struct TrackConfig {
     /// live target that is lost this frame (its minimum-cost node is the
     /// predicted one) is not a new target: it is that target's partly
     /// hidden view (Section IV.C.2, lost frames carried by prediction).
-    /// Default 6 (perfect detections, 8 hauls: success 0.816 → 0.825 at
-    /// 5 fps, 0.702 → 0.753 at 2.5 fps; fish split over two ids 27 → 22).
+    /// Default 3 (session 22, with `newborn_lost_gate` 0.6; 6 → 3 / 2: end
+    /// to end seeds 1–30 success 561 → 563 / 563 of 899, det recall after
+    /// tracking 0.714 → 0.723 / 0.727, count error −3.1 → −1.3 / −0.3 %;
+    /// `track_sim` Viterbi 0.755 / 0.694 → 0.758 / 0.701 and 0.758 /
+    /// 0.704; perfect detections, seeds 1–12, 289 / 218 → 291 / 218 of
+    /// 348 / 304). Session 2 chose 6 against no gate on perfect detections
+    /// (8 hauls: 0.816 → 0.825 at 5 fps, 0.702 → 0.753 at 2.5 fps).
     pub lost_gate: f32,
     /// `lost_gate` for a target lost on its first transition (a newborn:
     /// no velocity yet, so its prediction is `v_init`'s guess). Default
-    /// 0.6, a tenth of `lost_gate`: a newborn that refuses the view beside
+    /// 0.6 (a tenth of the `lost_gate` of 6 it was measured against, a
+    /// fifth of the default 3): a newborn that refuses the view beside
     /// its guess is as likely born on another fish (or a fragment) as on
     /// this one, and blocking that view's birth lost the fish for two
     /// frames (the newborn dies after `max_lost`, the view is blocked in
@@ -195,7 +201,8 @@ pub struct TrackConfig {
     /// success 545 → 561 of 899, count error −3.2 → −0.9 % (1–12) and
     /// −6.9 → −4.5 % (13–30); `track_sim` Viterbi 0.756 / 0.657 → 0.755 /
     /// 0.694 at 5 / 2.5 fps; perfect detections (seeds 1–12) 291 / 220 →
-    /// 289 / 218. 0 (no newborn blocks births): 556, 0.738 / 0.692.
+    /// 289 / 218 (all with `lost_gate` 6). 0 (no newborn blocks births):
+    /// 556, 0.738 / 0.692.
     pub newborn_lost_gate: f32,
     /// Maximum consecutive lost frames on a path; at most D − 2. Default 1:
     /// fish live about four frames at 5 fps, and on synthetic hauls a target
@@ -293,7 +300,7 @@ impl TrackConfig {
             share_cost: 24.0,
             gate_cost: 48.0,
             nn_gate: 6.0,
-            lost_gate: 6.0,
+            lost_gate: 3.0,
             newborn_lost_gate: 0.6,
             max_lost: 1,
             birth_area_factor: 2.0,
