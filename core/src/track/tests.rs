@@ -86,7 +86,11 @@ impl Log {
 }
 
 fn run(frames: &[Vec<Observation>], assoc: Assoc) -> (Log, TrackStats) {
-    let mut tr: DefaultTracker = Tracker::new(TrackConfig::for_frame(W, W)).unwrap();
+    run_assoc_cfg(frames, assoc, TrackConfig::for_frame(W, W))
+}
+
+fn run_assoc_cfg(frames: &[Vec<Observation>], assoc: Assoc, cfg: TrackConfig) -> (Log, TrackStats) {
+    let mut tr: DefaultTracker = Tracker::new(cfg).unwrap();
     let p = Params {
         tracker: assoc,
         ..Params::for_frame(W)
@@ -680,19 +684,7 @@ fn a_newborn_lost_on_its_first_step_does_not_block_another_fish() {
                 newborn_lost_gate: newborn_gate,
                 ..TrackConfig::for_frame(W, W)
             };
-            let mut tr: DefaultTracker = Tracker::new(cfg).unwrap();
-            let p = Params {
-                tracker: assoc,
-                ..Params::for_frame(W)
-            };
-            let mut log = Log::default();
-            {
-                let mut sink = log.sink();
-                for (f, obs) in frames.iter().enumerate() {
-                    tr.step(f as u32, obs, &p, &mut sink).unwrap();
-                }
-                tr.finish(&mut sink);
-            }
+            let (log, _) = run_assoc_cfg(&frames, assoc, cfg);
             let a = log.ids_of(1, 0);
             assert_eq!(a.len(), 1, "{assoc:?}: {:?}", log.frames);
             let (b2, b3) = (log.ids_of(2, 0), log.ids_of(3, 0));
