@@ -160,6 +160,13 @@ pub struct Params {
     /// the paper; `crate::photometric`). Default on.
     pub photometric: bool,
 
+    /// Whether a left object the object-height blocks left unpaired is
+    /// looked for in the right image itself along its epipolar band (beyond
+    /// the paper; `crate::epipolar`): depth and a right view for the
+    /// tracker where the right view's segmentation missed or merged the
+    /// fish. Its length is withheld. Default on.
+    pub stereo_search: bool,
+
     // --- Multiple-fish tracking (Section IV.B–C, Table I) ---
     /// v_ref x component — reference motion vector, eq. (7). Table I: (−1, 0).
     pub v_ref_x: f32,
@@ -212,6 +219,7 @@ impl Default for Params {
             high_floor_sigmas: 2.0,
             edge_step_ratio: 0.3,
             photometric: true,
+            stereo_search: true,
             v_ref_x: -1.0,
             v_ref_y: 0.0,
             alpha: 0.3,

@@ -506,6 +506,7 @@ mod tests {
                 mu_sad: 0.0,
                 block_disparity: [0.0; 4],
                 occluded: false,
+                searched: false,
             })
             .collect()
     }

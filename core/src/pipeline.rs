@@ -602,6 +602,18 @@ impl<
                 self.stats.photometric_mapped = self.stats.photometric_mapped.saturating_add(1);
             }
         }
+        // the left objects left unpaired, looked for in the right image
+        if params.stereo_search {
+            crate::epipolar::search_unpaired(
+                &left,
+                &right,
+                &self.left,
+                &mut self.right,
+                &mut self.pairs,
+                &self.cfg.geometry,
+                &self.cfg.pairing,
+            );
+        }
         stage(sink, Stage::Pair);
 
         self.lengths.clear();
@@ -631,7 +643,13 @@ impl<
                 &self.cfg.length,
             );
             let l = match l {
-                Ok(v) => {
+                Ok(mut v) => {
+                    // a searched pair's right mask is the left one shifted:
+                    // the consistency gate has no second view to check
+                    // against, so its length is withheld (crate::epipolar)
+                    if p.searched {
+                        v.consistent = false;
+                    }
                     if !v.consistent {
                         self.stats.length_withheld = self.stats.length_withheld.saturating_add(1);
                     }

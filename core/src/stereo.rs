@@ -86,6 +86,12 @@ pub struct PairingLimits {
     /// brighter water better than the fish itself at the plain SAD. False:
     /// the plain SAD, as the blocks.
     pub zero_mean_d_o: bool,
+    /// Epipolar search ([`crate::epipolar`], `Params::stereo_search`): the
+    /// best cost must be at most this share of the scan's median cost.
+    pub search_max_ratio: f32,
+    /// Epipolar search: the best cost must be at most this share of the
+    /// lowest cost more than half the box's width away.
+    pub search_max_runner_up: f32,
 }
 
 impl Default for PairingLimits {
@@ -98,6 +104,8 @@ impl Default for PairingLimits {
             min_size_ratio: 0.5,
             max_sad_per_pixel: 40.0,
             zero_mean_d_o: true,
+            search_max_ratio: 0.7,
+            search_max_runner_up: 0.85,
         }
     }
 }
@@ -127,6 +135,9 @@ pub struct StereoPair {
     pub block_disparity: [f32; BLOCKS],
     /// True when this pair shares its right object with another pair (occlusion).
     pub occluded: bool,
+    /// True when the right object was found by the epipolar search
+    /// ([`crate::epipolar`]) rather than segmented.
+    pub searched: bool,
 }
 
 /// Counters of one pairing run.
@@ -143,6 +154,8 @@ pub struct PairingStats {
     pub unpaired_left: u32,
     /// Pairs accepted through the occlusion exception.
     pub occlusions: u32,
+    /// Pairs whose right object the epipolar search found ([`crate::epipolar`]).
+    pub searched: u32,
 }
 
 /// The pairs of one frame.
@@ -743,6 +756,7 @@ pub fn pair_objects<const N: usize, const R: usize>(
                 mu_sad: m.mu_sad,
                 block_disparity: m.block_disparity,
                 occluded: false,
+                searched: false,
             });
         }
     }
@@ -783,6 +797,7 @@ pub fn pair_objects<const N: usize, const R: usize>(
                 mu_sad: m.mu_sad,
                 block_disparity: m.block_disparity,
                 occluded: true,
+                searched: false,
             });
         } else {
             out.stats.unpaired_left += 1;

@@ -13,6 +13,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use fishtrack_core::epipolar::SEARCHED_LEVEL;
 use fishtrack_core::length::wholly_inside_valid;
 use fishtrack_core::pipeline::{DefaultPipeline, PipelineEvent};
 
@@ -98,7 +99,15 @@ pub fn run(dir: &Path) -> Result<()> {
         all_obs.push(pipe.observations().to_vec());
         // stereo on the core's objects
         let lo = rs::ref_objects(pipe.left_objects());
-        let ro = rs::ref_objects(pipe.right_objects());
+        // the segmented right objects only: the search below finds its own
+        let mut ro = rs::ref_objects(pipe.right_objects());
+        ro.truncate(
+            pipe.right_objects()
+                .items
+                .iter()
+                .filter(|o| o.level != SEARCHED_LEVEL)
+                .count(),
+        );
         let (w, h) = (l.width() as usize, l.height() as usize);
         let lg = Gray {
             data: l.as_raw(),
@@ -132,6 +141,17 @@ pub fn run(dir: &Path) -> Result<()> {
                 ref_pairs = rs::pair(&lg, &rg, &lo, &ro, &geom, &limits);
             }
         }
+        if setup.params.stereo_search {
+            crate::reference::epipolar::search_unpaired(
+                &lg,
+                &rg,
+                &lo,
+                &mut ro,
+                &mut ref_pairs,
+                &geom,
+                &limits,
+            );
+        }
         let reference_raw: Vec<PairLength<rs::RefLength>> = ref_pairs
             .iter()
             .map(|p| {
@@ -145,9 +165,14 @@ pub fn run(dir: &Path) -> Result<()> {
                     }
                     _ => false,
                 };
+                // a searched pair's length is withheld (core::epipolar)
                 let len = inside
                     .then(|| rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length))
-                    .flatten();
+                    .flatten()
+                    .map(|mut v| {
+                        v.consistent &= !p.searched;
+                        v
+                    });
                 (p.left, p.right, len)
             })
             .collect();

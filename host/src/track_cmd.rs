@@ -624,7 +624,7 @@ fn diag_row(
                 ",e{e}_px,e{e}_py,e{e}_d,e{e}_mask_d,e{e}_dev,e{e}_z,e{e}_ratio,e{e}_mis,e{e}_comp,e{e}_pl,e{e}_pr,e{e}_touch"
             );
         }
-        out.push('\n');
+        out.push_str(",searched\n");
     }
     let _ = write!(
         out,
@@ -669,6 +669,7 @@ fn diag_row(
         }
         None => out.push_str(",0,,,,,,,,,,,,,,,,,,,,,,,,,,,,,"),
     }
+    let _ = write!(out, ",{}", s.pair.searched as u8);
     out.push('\n');
 }
 

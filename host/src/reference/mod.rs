@@ -5,6 +5,7 @@
 
 pub mod background;
 pub mod compare;
+pub mod epipolar;
 pub mod photometric;
 pub mod segment;
 pub mod split;

@@ -32,7 +32,7 @@ pub struct Gray<'a> {
 }
 
 impl Gray<'_> {
-    fn at(&self, x: i64, y: i64) -> Option<f64> {
+    pub(crate) fn at(&self, x: i64, y: i64) -> Option<f64> {
         if x < 0 || y < 0 || x as usize >= self.w || y as usize >= self.h {
             return None;
         }
@@ -120,7 +120,7 @@ impl Geometry {
         Some(Vector3::new(h[0] / h[3], h[1] / h[3], h[2] / h[3]))
     }
 
-    fn disparity_at_depth(&self, z: f64) -> f64 {
+    pub(crate) fn disparity_at_depth(&self, z: f64) -> f64 {
         self.f * self.baseline / z + (self.cx - self.cx_right)
     }
 }
@@ -187,6 +187,10 @@ pub struct Limits {
     pub max_sad: f64,
     /// d_o by the zero-mean whole-box SAD.
     pub zero_mean_d_o: bool,
+    /// Epipolar search: best cost at most this share of the scan's median.
+    pub search_max_ratio: f64,
+    /// Epipolar search: best cost at most this share of the runner-up.
+    pub search_max_runner_up: f64,
 }
 
 impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
@@ -199,6 +203,8 @@ impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
             min_size_ratio: l.min_size_ratio as f64,
             max_sad: l.max_sad_per_pixel as f64,
             zero_mean_d_o: l.zero_mean_d_o,
+            search_max_ratio: l.search_max_ratio as f64,
+            search_max_runner_up: l.search_max_runner_up as f64,
         }
     }
 }
@@ -216,12 +222,14 @@ pub struct RefPair {
     pub mu_sad: f64,
     /// Shares its right object (occlusion).
     pub occluded: bool,
+    /// Its right object was found by the epipolar search ([`super::epipolar`]).
+    pub searched: bool,
 }
 
 /// Mean absolute difference of left columns `x0..x1`, rows `y0..y1`
 /// against the right image `d` pixels to the left; `None` when fewer than
 /// half of the pixels have a right counterpart.
-fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option<f64> {
+pub(crate) fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option<f64> {
     let x1 = x1.min(l.w as i64);
     let y1 = y1.min(l.h as i64);
     if x1 <= x0 || y1 <= y0 {
@@ -454,6 +462,7 @@ pub fn pair(
                 d_o: d,
                 mu_sad: mu,
                 occluded: false,
+                searched: false,
             });
         }
     }
@@ -483,6 +492,7 @@ pub fn pair(
                     d_o: d,
                     mu_sad: mu,
                     occluded: true,
+                    searched: false,
                 });
             }
         }
