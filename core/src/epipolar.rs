@@ -19,9 +19,12 @@
 //!   as [`crate::stereo::zsad_per_pixel`]: the two cameras see the water at
 //!   different levels), over the template pixels whose right counterpart
 //!   lies in the image, at least 90 % of them.
-//! - Scan: every other template row at disparity steps of 2 (coarser when
-//!   the range holds more than [`MAX_SCAN`] steps), then every row at the
-//!   disparities within ±2 of the scan's best.
+//! - Scan: every other column of every fourth template row (an eighth of
+//!   its pixels) at every disparity (in steps when the range holds more
+//!   than [`MAX_SCAN`] of them), then the whole template at the scan's best
+//!   and its neighbours within a step. (Disparity steps of 2 missed a
+//!   finely textured fish whose cost has a basin one disparity wide, which
+//!   a unit test keeps.)
 //! - Acceptance: the best cost must stand out from the scan — at most
 //!   [`PairingLimits::search_max_ratio`] of the scan's median cost (the
 //!   template over water and unrelated clutter), and at most
@@ -39,7 +42,7 @@
 //! consistency gate as any pair ([`crate::length`]).
 //!
 //! Bounded work: per unpaired left object at most [`MAX_SCAN`] scan
-//! disparities over half its template, plus 5 full evaluations; every
+//! disparities over half its template, plus `2·step + 1` full ones; every
 //! difference is counted in [`crate::stereo::PairingStats::sad_ops`].
 //! Memory: the scan's disparities and costs (`MAX_SCAN` of them, 8 KiB) and a 511-bin histogram
 //! on the stack; no heap. A right object that does not fit the object or run
@@ -56,6 +59,9 @@ pub const SEARCHED_LEVEL: u8 = 2;
 
 /// Most scan disparities per object (the step grows beyond it).
 pub const MAX_SCAN: usize = 1024;
+
+/// The scan's pixel lattice (every `.0`-th column of every `.1`-th row).
+const SCAN_LATTICE: (u32, u32) = (2, 4);
 
 /// Least share of the template's pixels whose right counterpart must lie
 /// inside the right image for a disparity to count.
@@ -114,26 +120,34 @@ fn template<'a>(runs: &'a [Run], m: u32, width: u32) -> impl Iterator<Item = Seg
     })
 }
 
-/// Zero-mean SAD per pixel of the template rows `y ≡ 0 (mod row_step)`
-/// against the right image shifted by `−d`; `None` below [`MIN_COMPARED`]
-/// of those rows' pixels compared. Adds the differences to `ops`.
+/// Columns `x` of `[x0, x1)` with `x ≡ 0 (mod step)`.
+const fn multiples(x0: u32, x1: u32, step: u32) -> u64 {
+    (x1.div_ceil(step) as u64).saturating_sub(x0.div_ceil(step) as u64)
+}
+
+/// Zero-mean SAD per pixel of the template pixels on the lattice
+/// `(x, y) ≡ (0, 0) mod (step.0, step.1)` against the right image shifted
+/// by `−d`; `None` below [`MIN_COMPARED`] of those pixels compared. Adds
+/// the differences to `ops`.
 fn cost_at(
     left: &ImageView<'_>,
     right: &ImageView<'_>,
     runs: &[Run],
     m: u32,
     d: i32,
-    row_step: u32,
+    step: (u32, u32),
     ops: &mut u64,
 ) -> Option<f32> {
     let w = left.width() as u32;
+    let (cs, rs) = (step.0.max(1), step.1.max(1));
     let mut hist = [0u32; 511];
     let (mut n, mut total) = (0u64, 0u64);
-    for s in template(runs, m, w).filter(|s| s.y % row_step == 0) {
-        total += (s.x1 - s.x0) as u64;
-        // right column x − d inside [0, w)
+    for s in template(runs, m, w).filter(|s| s.y % rs == 0) {
+        total += multiples(s.x0, s.x1, cs);
+        // right column x − d inside [0, w), x on the lattice
         let lo = (s.x0 as i64).max(d as i64).max(0);
         let hi = (s.x1 as i64).min(w as i64 + d as i64);
+        let lo = lo + (cs as i64 - lo % cs as i64) % cs as i64;
         if hi <= lo {
             continue;
         }
@@ -142,28 +156,44 @@ fn cost_at(
         let (Some(a), Some(b)) = (left.row(y).get(lo..hi), right.row(y).get(rlo..rhi)) else {
             continue;
         };
-        for (&p, &q) in a.iter().zip(b) {
+        let (a, b) = (a.iter().step_by(cs as usize), b.iter().step_by(cs as usize));
+        n += a.len() as u64;
+        for (&p, &q) in a.zip(b) {
             if let Some(c) = hist.get_mut((p as usize + 255) - q as usize) {
                 *c += 1;
             }
         }
-        n += a.len() as u64;
     }
     *ops = ops.saturating_add(n);
     if n == 0 || (n as f32) < MIN_COMPARED * total as f32 {
         return None;
     }
+    Some(zero_mean_sad(&hist, n))
+}
+
+/// `Σ |n·v − S| · c_v / n²` over a histogram `c` of the differences `v`
+/// (`S = Σ c_v·v`, `n = Σ c_v`): the zero-mean SAD per pixel, exactly, as
+/// `n·(S_hi − S_lo) − S·(C_hi − C_lo)` over the bins above and below the
+/// mean — integer sums over the bins and four products, not a product per
+/// bin. `|S| ≤ 255·n` and every sum fits `i64` for `n < 2³²`; the products
+/// are taken in `i128`.
+fn zero_mean_sad(hist: &[u32; 511], n: u64) -> f32 {
     let ni = n as i64;
     let sum: i64 = hist.iter().zip(-255i64..).map(|(&c, v)| c as i64 * v).sum();
-    // |n·v − sum| ≤ 2⁴¹ for n < 2³²; counts ≤ 2³²: u128 holds the total
-    let acc: u128 = hist
-        .iter()
-        .zip(-255i64..)
-        .filter(|(&c, _)| c > 0)
-        .map(|(&c, v)| c as u128 * (ni * v - sum).unsigned_abs() as u128)
-        .sum();
+    let (mut c_hi, mut s_hi, mut c_lo, mut s_lo) = (0i64, 0i64, 0i64, 0i64);
+    for (&c, v) in hist.iter().zip(-255i64..) {
+        let t = ni * v - sum;
+        if t > 0 {
+            c_hi += c as i64;
+            s_hi += c as i64 * v;
+        } else if t < 0 {
+            c_lo += c as i64;
+            s_lo += c as i64 * v;
+        }
+    }
+    let acc = ni as i128 * (s_hi - s_lo) as i128 - sum as i128 * (c_hi - c_lo) as i128;
     let nf = n as f64;
-    Some((acc as f64 / (nf * nf)) as f32)
+    (acc as f64 / (nf * nf)) as f32
 }
 
 /// Searches the right image for one left object (see the module
@@ -184,12 +214,12 @@ pub fn search_object(
     }
     let m = ((obj.obb.half_h * 0.5) as u32).max(4);
     let span = (hi - lo) as usize + 1;
-    let step = span.div_ceil(MAX_SCAN).max(2);
+    let step = span.div_ceil(MAX_SCAN).max(1);
     let mut scan = [(0i32, f32::INFINITY); MAX_SCAN];
     let mut n = 0usize;
     let mut d = lo;
     while d <= hi {
-        if let Some(c) = cost_at(left, right, runs, m, d, 2, ops) {
+        if let Some(c) = cost_at(left, right, runs, m, d, SCAN_LATTICE, ops) {
             if let Some(slot) = scan.get_mut(n) {
                 *slot = (d, c);
                 n += 1;
@@ -210,8 +240,9 @@ pub fn search_object(
     let median = mid.1;
     // refine at every row around the scan's best
     let mut fine: Option<(i32, f32)> = None;
-    for d in (coarse_d - 2).max(lo)..=(coarse_d + 2).min(hi) {
-        if let Some(c) = cost_at(left, right, runs, m, d, 1, ops) {
+    let reach = step as i32;
+    for d in (coarse_d - reach).max(lo)..=(coarse_d + reach).min(hi) {
+        if let Some(c) = cost_at(left, right, runs, m, d, (1, 1), ops) {
             if fine.is_none_or(|(_, b)| c < b) {
                 fine = Some((d, c));
             }
@@ -406,4 +437,298 @@ pub fn search_unpaired<const N: usize, const R: usize>(
 /// `b` moved left by `d` pixels (clamped at 0).
 fn shifted(b: &Roi, d: i32) -> Roi {
     Roi::new((b.x as i64 - d as i64).max(0) as u32, b.y, b.w, b.h)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::object::OrientedBox;
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    const W: usize = 400;
+    const H: usize = 200;
+
+    /// f 600 px, baseline 100 mm: disparities 3 (20 m) to 120 (0.5 m), ± 8.
+    fn geom() -> StereoGeometry {
+        StereoGeometry {
+            f: 600.0,
+            cx: 200.0,
+            cy: 100.0,
+            cx_right: 200.0,
+            baseline_mm: 100.0,
+        }
+    }
+
+    /// Water at `level` with deterministic noise of ± `amp` grey levels.
+    fn water(level: u8, amp: u32, seed: u32) -> Vec<u8> {
+        let mut s = seed.wrapping_mul(2_654_435_761).wrapping_add(1);
+        (0..W * H)
+            .map(|_| {
+                s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let n = (s >> 16) % (2 * amp + 1);
+                (level as u32 + n).saturating_sub(amp).min(255) as u8
+            })
+            .collect()
+    }
+
+    /// Is `(x, y)` inside the fish (an ellipse of half-axes 50 × 15) centred at `cx, cy`?
+    fn in_fish(x: i64, y: i64, cx: i64, cy: i64) -> bool {
+        let (u, v) = ((x - cx) as f32 / 50.0, (y - cy) as f32 / 15.0);
+        u * u + v * v <= 1.0
+    }
+
+    /// Paints a textured fish into `img` centred at `(cx, cy)`: grey
+    /// `base` plus a texture that moves with the fish.
+    fn paint(img: &mut [u8], cx: i64, cy: i64, base: u8) {
+        for y in 0..H as i64 {
+            for x in 0..W as i64 {
+                if in_fish(x, y, cx, cy) {
+                    let t = ((x - cx + 60) * 7 % 23 + (y - cy + 20) * 3 % 11) as u8;
+                    img[y as usize * W + x as usize] = base.saturating_add(t);
+                }
+            }
+        }
+    }
+
+    /// The left object of a fish painted at `(cx, cy)`.
+    fn fish_object(objs: &mut Objects<8, 512>, cx: i64, cy: i64) {
+        let start = objs.runs.len() as u32;
+        let (mut x0, mut y0, mut x1, mut y1) = (i64::MAX, i64::MAX, 0, 0);
+        let mut area = 0u32;
+        for y in 0..H as i64 {
+            let xs: Vec<i64> = (0..W as i64).filter(|&x| in_fish(x, y, cx, cy)).collect();
+            if let (Some(&a), Some(&b)) = (xs.first(), xs.last()) {
+                objs.runs
+                    .push(Run {
+                        y: y as u16,
+                        x0: a as u16,
+                        x1: b as u16 + 1,
+                    })
+                    .unwrap();
+                area += xs.len() as u32;
+                (x0, x1, y0, y1) = (x0.min(a), x1.max(b + 1), y0.min(y), y1.max(y + 1));
+            }
+        }
+        let len = objs.runs.len() as u32 - start;
+        objs.items
+            .push(Object {
+                bbox: Roi::new(x0 as u32, y0 as u32, (x1 - x0) as u32, (y1 - y0) as u32),
+                obb: OrientedBox {
+                    cx: cx as f32,
+                    cy: cy as f32,
+                    half_w: 50.0,
+                    half_h: 15.0,
+                    angle: 0.0,
+                },
+                area,
+                runs: RunSpan { start, len },
+                ..Object::default()
+            })
+            .unwrap();
+    }
+
+    struct Scene {
+        left: Vec<u8>,
+        right: Vec<u8>,
+        lobj: Objects<8, 512>,
+    }
+
+    /// One fish at (250, 100) in the left view; in the right view at each
+    /// of `disparities` (none: the right view is water only).
+    fn scene(disparities: &[i64]) -> Scene {
+        let (mut left, mut right) = (water(60, 4, 1), water(64, 4, 2));
+        paint(&mut left, 250, 100, 110);
+        for &d in disparities {
+            paint(&mut right, 250 - d, 100, 114);
+        }
+        let mut lobj = Objects::new();
+        fish_object(&mut lobj, 250, 100);
+        Scene { left, right, lobj }
+    }
+
+    fn run(s: &Scene, robj: &mut Objects<8, 512>, pairs: &mut StereoPairs<8>) {
+        let l = ImageView::packed(&s.left, W, H).unwrap();
+        let r = ImageView::packed(&s.right, W, H).unwrap();
+        search_unpaired(
+            &l,
+            &r,
+            &s.lobj,
+            robj,
+            pairs,
+            &geom(),
+            &PairingLimits::default(),
+        );
+    }
+
+    #[test]
+    fn finds_a_fish_the_right_segmentation_missed_at_its_disparity() {
+        let s = scene(&[37]);
+        let (mut robj, mut pairs) = (Objects::new(), StereoPairs::default());
+        pairs.stats.unpaired_left = 1;
+        run(&s, &mut robj, &mut pairs);
+        assert_eq!(pairs.pairs.len(), 1);
+        let p = pairs.pairs[0];
+        assert!(p.searched && !p.occluded);
+        assert_eq!((p.left, p.right, p.d_o), (0, 0, 37.0));
+        assert_eq!(p.block_disparity, [37.0; 4]);
+        assert!(p.mu_sad < 10.0, "{}", p.mu_sad);
+        let (lo, ro) = (s.lobj.items[0], robj.items[0]);
+        assert_eq!(ro.level, SEARCHED_LEVEL);
+        assert_eq!(
+            ro.bbox,
+            Roi::new(lo.bbox.x - 37, lo.bbox.y, lo.bbox.w, lo.bbox.h)
+        );
+        assert_eq!(ro.area, lo.area);
+        assert_eq!(ro.obb.cx, lo.obb.cx - 37.0);
+        // measured on the right image: the fish there is 4 levels brighter
+        assert!(ro.mean > 114.0, "{}", ro.mean);
+        assert_eq!(ro.hist.iter().sum::<u32>(), ro.area);
+        assert_eq!(robj.runs_of(&ro).len(), s.lobj.runs_of(&lo).len());
+        assert_eq!((pairs.stats.searched, pairs.stats.unpaired_left), (1, 0));
+        assert!(pairs.stats.sad_ops > 0);
+    }
+
+    #[test]
+    fn the_search_score_stands_out_only_at_the_fish() {
+        let s = scene(&[37]);
+        let l = ImageView::packed(&s.left, W, H).unwrap();
+        let r = ImageView::packed(&s.right, W, H).unwrap();
+        let (lo, hi) = PairingLimits::default().disparity_range(&geom());
+        let o = s.lobj.items[0];
+        let mut ops = 0;
+        let sc = search_object(&l, &r, &o, s.lobj.runs_of(&o), lo, hi, &mut ops).unwrap();
+        assert_eq!(sc.d, 37);
+        // noise of ± 4 in each view: about 2.5 levels per pixel at the fish
+        assert!(sc.best < 4.0 && sc.median > 2.0 * sc.best, "{sc:?}");
+        assert!(sc.stands_out(&PairingLimits::default()));
+    }
+
+    #[test]
+    fn zero_mean_sad_is_the_plain_formula() {
+        let mut state = 7u32;
+        for _ in 0..200 {
+            let mut hist = [0u32; 511];
+            let mut diffs = std::vec::Vec::new();
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let (k, spread) = (1 + (state >> 8) % 300, 1 + (state >> 20) % 511);
+            for _ in 0..k {
+                state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let v = ((state >> 9) % spread) as i64 - 255;
+                hist[(v + 255) as usize] += 1;
+                diffs.push(v as f64);
+            }
+            let n = diffs.len() as f64;
+            let mean = diffs.iter().sum::<f64>() / n;
+            let plain = diffs.iter().map(|v| (v - mean).abs()).sum::<f64>() / n;
+            let fast = zero_mean_sad(&hist, diffs.len() as u64) as f64;
+            assert!(
+                (fast - plain).abs() <= 1e-5 * plain.max(1.0),
+                "{fast} {plain}"
+            );
+        }
+    }
+
+    #[test]
+    fn water_alone_in_the_right_view_leaves_the_object_unpaired() {
+        let s = scene(&[]);
+        let (mut robj, mut pairs) = (Objects::new(), StereoPairs::default());
+        run(&s, &mut robj, &mut pairs);
+        assert!(pairs.pairs.is_empty() && robj.items.is_empty() && robj.runs.is_empty());
+        assert_eq!(pairs.stats.searched, 0);
+    }
+
+    #[test]
+    fn two_lookalikes_on_the_band_are_refused() {
+        // the same fish at disparities 10 and 120: which is it?
+        let s = scene(&[10, 120]);
+        let (mut robj, mut pairs) = (Objects::new(), StereoPairs::default());
+        run(&s, &mut robj, &mut pairs);
+        assert!(pairs.pairs.is_empty(), "{:?}", pairs.pairs);
+    }
+
+    #[test]
+    fn a_region_another_pair_explains_is_not_taken() {
+        let s = scene(&[37]);
+        // a right object where the fish is, already paired with left object 1
+        let mut robj: Objects<8, 512> = Objects::new();
+        fish_object(&mut robj, 250 - 37, 100);
+        let mut pairs = StereoPairs::default();
+        pairs
+            .pairs
+            .push(StereoPair {
+                left: 1,
+                right: 0,
+                ..StereoPair::default()
+            })
+            .unwrap();
+        run(&s, &mut robj, &mut pairs);
+        assert_eq!(pairs.pairs.len(), 1);
+        assert_eq!(robj.items.len(), 1);
+    }
+
+    #[test]
+    fn full_right_objects_are_reported_not_overrun() {
+        let s = scene(&[37]);
+        let mut robj: Objects<8, 512> = Objects::new();
+        for k in 0..8 {
+            robj.items
+                .push(Object {
+                    bbox: Roi::new(k * 4, 0, 2, 2),
+                    ..Object::default()
+                })
+                .unwrap();
+        }
+        let mut pairs = StereoPairs::default();
+        pairs.stats.unpaired_left = 1;
+        run(&s, &mut robj, &mut pairs);
+        assert!(pairs.pairs.is_empty());
+        assert_eq!(pairs.stats.unpaired_left, 1);
+        // no run pool room: nothing added either
+        let mut robj: Objects<8, 512> = Objects::new();
+        while robj.runs.push(Run::default()).is_ok() {}
+        let mut pairs = StereoPairs::default();
+        run(&s, &mut robj, &mut pairs);
+        assert!(pairs.pairs.is_empty() && robj.items.is_empty());
+        assert_eq!(robj.runs.len(), 512);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// Random views, random masks anywhere (cut by the border, outside
+        /// it): never a panic; what is added is consistent.
+        #[test]
+        fn random_scenes_never_panic(
+            seed in 0u32..1000,
+            d in 0i64..130,
+            runs in proptest::collection::vec((0u16..220, 0u16..420, 1u16..80), 1..40),
+        ) {
+            let (mut left, mut right) = (water(60, 30, seed), water(60, 30, seed + 7));
+            paint(&mut left, 250, 100, 110);
+            paint(&mut right, 250 - d, 100, 110);
+            let mut lobj: Objects<8, 512> = Objects::new();
+            let mut sorted = runs.clone();
+            sorted.sort();
+            for (y, x0, len) in sorted {
+                lobj.runs.push(Run { y, x0, x1: x0.saturating_add(len) }).unwrap();
+            }
+            lobj.items.push(Object {
+                bbox: Roi::new(0, 0, W as u32 + 30, H as u32 + 30),
+                runs: RunSpan { start: 0, len: lobj.runs.len() as u32 },
+                ..Object::default()
+            }).unwrap();
+            let s = Scene { left, right, lobj };
+            let (mut robj, mut pairs) = (Objects::new(), StereoPairs::default());
+            run(&s, &mut robj, &mut pairs);
+            for p in pairs.pairs.iter() {
+                let ro = robj.items[p.right as usize];
+                prop_assert!(p.searched);
+                for r in robj.runs_of(&ro) {
+                    prop_assert!((r.y as usize) < H && r.x0 < r.x1 && r.x1 as usize <= W);
+                }
+                prop_assert!(ro.bbox.right() as usize <= W && ro.area > 0);
+            }
+        }
+    }
 }

@@ -279,6 +279,12 @@ pub struct PipelineStats {
     pub right_objects_dropped: u32,
     /// Stereo pairs.
     pub pairs: u32,
+    /// Of those, pairs whose right object the epipolar search found
+    /// ([`crate::epipolar`]).
+    pub pairs_searched: u32,
+    /// Absolute differences the pairing computed (object-height blocks,
+    /// `d_o` and the epipolar search; [`crate::stereo::PairingStats::sad_ops`]).
+    pub pair_sad_ops: u64,
     /// Pairs measured.
     pub measured: u32,
     /// Pairs whose length measurement failed.
@@ -670,7 +676,9 @@ impl<
         let slot_i = frame as usize % Q;
         let mut counts = FrameCounts {
             left_objects: self.left.items.len() as u32,
-            right_objects: self.right.items.len() as u32,
+            // segmented ones (the search's are counted with the pairs)
+            right_objects: (self.right.items.len() as u32)
+                .saturating_sub(self.pairs.stats.searched),
             pairs: self.pairs.pairs.len() as u32,
             ..FrameCounts::default()
         };
@@ -742,6 +750,14 @@ impl<
             });
         }
         self.stats.pairs = self.stats.pairs.saturating_add(counts.pairs);
+        self.stats.pairs_searched = self
+            .stats
+            .pairs_searched
+            .saturating_add(self.pairs.stats.searched);
+        self.stats.pair_sad_ops = self
+            .stats
+            .pair_sad_ops
+            .saturating_add(self.pairs.stats.sad_ops);
         self.stats.measured = self.stats.measured.saturating_add(counts.measured);
 
         let Pipeline {

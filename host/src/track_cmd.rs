@@ -739,6 +739,8 @@ fn write_summary(
             "left_objects": stats.left_objects,
             "right_objects": stats.right_objects,
             "stereo_pairs": stats.pairs,
+            "stereo_pairs_searched": stats.pairs_searched,
+            "stereo_sad_ops": stats.pair_sad_ops,
             "pairs_measured": stats.measured,
             "length_failed": stats.length_failed,
             "length_withheld": stats.length_withheld,

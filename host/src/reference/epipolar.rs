@@ -43,10 +43,13 @@ fn template(obj: &RefObject, m: i64, w: i64) -> Vec<(i64, i64)> {
     out
 }
 
-/// Zero-mean SAD per pixel of the template's rows `y % row_step == 0`
-/// against the right image `d` pixels to the left.
-fn cost(l: &Gray, r: &Gray, t: &[(i64, i64)], d: i64, row_step: i64) -> Option<f64> {
-    let rows: Vec<&(i64, i64)> = t.iter().filter(|p| p.1 % row_step == 0).collect();
+/// Zero-mean SAD per pixel of the template's pixels with `x % step.0 ==
+/// 0` and `y % step.1 == 0` against the right image `d` pixels to the left.
+fn cost(l: &Gray, r: &Gray, t: &[(i64, i64)], d: i64, step: (i64, i64)) -> Option<f64> {
+    let rows: Vec<&(i64, i64)> = t
+        .iter()
+        .filter(|p| p.0 % step.0 == 0 && p.1 % step.1 == 0)
+        .collect();
     let diffs: Vec<f64> = rows
         .iter()
         .filter_map(|&&(x, y)| Some(l.at(x, y)? - r.at(x - d, y)?))
@@ -75,10 +78,10 @@ pub fn search_object(
     let m = ((obj.h_o / 4.0).floor() as i64).max(4);
     let t = template(obj, m, l.w as i64);
     let span = hi - lo + 1;
-    let step = ((span + MAX_SCAN - 1) / MAX_SCAN).max(2);
+    let step = ((span + MAX_SCAN - 1) / MAX_SCAN).max(1);
     let scan: Vec<(i64, f64)> = (lo..=hi)
         .step_by(step as usize)
-        .filter_map(|d| Some((d, cost(l, r, &t, d, 2)?)))
+        .filter_map(|d| Some((d, cost(l, r, &t, d, (2, 4))?)))
         .collect();
     // the first of equal minima
     let mut coarse = *scan.first()?;
@@ -97,8 +100,8 @@ pub fn search_object(
     sorted.sort_by(f64::total_cmp);
     let median = sorted[sorted.len() / 2];
     let mut fine: Option<(i64, f64)> = None;
-    for d in (coarse.0 - 2).max(lo)..=(coarse.0 + 2).min(hi) {
-        if let Some(c) = cost(l, r, &t, d, 1) {
+    for d in (coarse.0 - step).max(lo)..=(coarse.0 + step).min(hi) {
+        if let Some(c) = cost(l, r, &t, d, (1, 1)) {
             if fine.is_none_or(|f| c < f.1) {
                 fine = Some((d, c));
             }
