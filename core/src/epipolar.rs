@@ -695,7 +695,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(48))]
+        #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 2 } else { 48 }))]
         /// Random views, random masks anywhere (cut by the border, outside
         /// it): never a panic; what is added is consistent.
         #[test]
