@@ -20,7 +20,8 @@
 //!   different levels), over the template pixels whose right counterpart
 //!   lies in the image, at least 90 % of them.
 //! - Scan: every other column of every fourth template row (an eighth of
-//!   its pixels) at every disparity (in steps when the range holds more
+//!   its pixels; fewer rows for templates over 8 · [`SCAN_BUDGET`] pixels,
+//!   so that a scan step compares at most `SCAN_BUDGET`) at every disparity (in steps when the range holds more
 //!   than [`MAX_SCAN`] of them), then the whole template at the scan's best
 //!   and its neighbours within a step. (Disparity steps of 2 missed a
 //!   finely textured fish whose cost has a basin one disparity wide, which
@@ -42,7 +43,8 @@
 //! consistency gate as any pair ([`crate::length`]).
 //!
 //! Bounded work: per unpaired left object at most [`MAX_SCAN`] scan
-//! disparities over half its template, plus `2·step + 1` full ones; every
+//! disparities of about [`SCAN_BUDGET`] pixels each (every `4k`-th row:
+//! exact for rows of equal length), plus `2·step + 1` whole-template ones; every
 //! difference is counted in [`crate::stereo::PairingStats::sad_ops`].
 //! Memory: the scan's disparities and costs (`MAX_SCAN` of them, 8 KiB) and a 511-bin histogram
 //! on the stack; no heap. A right object that does not fit the object or run
@@ -60,8 +62,14 @@ pub const SEARCHED_LEVEL: u8 = 2;
 /// Most scan disparities per object (the step grows beyond it).
 pub const MAX_SCAN: usize = 1024;
 
-/// The scan's pixel lattice (every `.0`-th column of every `.1`-th row).
+/// The scan's pixel lattice (every `.0`-th column of every `.1`-th row)
+/// for templates of up to `8 ·` [`SCAN_BUDGET`] pixels; larger ones take
+/// every `4k`-th row so the scan compares at most `SCAN_BUDGET` pixels per
+/// disparity.
 const SCAN_LATTICE: (u32, u32) = (2, 4);
+
+/// Most template pixels the scan compares per disparity.
+pub const SCAN_BUDGET: u64 = 16_384;
 
 /// Least share of the template's pixels whose right counterpart must lie
 /// inside the right image for a disparity to count.
@@ -213,13 +221,21 @@ pub fn search_object(
         return None;
     }
     let m = ((obj.obb.half_h * 0.5) as u32).max(4);
+    let pixels: u64 = template(runs, m, left.width() as u32)
+        .map(|s| (s.x1 - s.x0) as u64)
+        .sum();
+    let k = pixels.div_ceil(8 * SCAN_BUDGET).max(1);
+    let lattice = (
+        SCAN_LATTICE.0,
+        SCAN_LATTICE.1.saturating_mul(k.min(1 << 16) as u32),
+    );
     let span = (hi - lo) as usize + 1;
     let step = span.div_ceil(MAX_SCAN).max(1);
     let mut scan = [(0i32, f32::INFINITY); MAX_SCAN];
     let mut n = 0usize;
     let mut d = lo;
     while d <= hi {
-        if let Some(c) = cost_at(left, right, runs, m, d, SCAN_LATTICE, ops) {
+        if let Some(c) = cost_at(left, right, runs, m, d, lattice, ops) {
             if let Some(slot) = scan.get_mut(n) {
                 *slot = (d, c);
                 n += 1;
@@ -692,6 +708,80 @@ mod tests {
         run(&s, &mut robj, &mut pairs);
         assert!(pairs.pairs.is_empty() && robj.items.is_empty());
         assert_eq!(robj.runs.len(), 512);
+    }
+
+    #[test]
+    #[cfg_attr(miri, ignore = "a 1400 × 600 pair: too slow to interpret")]
+    fn a_large_template_is_scanned_within_the_budget() {
+        // a 1200 × 500 px fish (≈ 470 000 mask pixels) in 1400 × 600 views
+        let (w, h) = (1400usize, 600usize);
+        let inside = |x: i64, y: i64, cx: i64| {
+            let (u, v) = ((x - cx) as f32 / 600.0, (y - 300) as f32 / 250.0);
+            u * u + v * v <= 1.0
+        };
+        let mut left = vec![60u8; w * h];
+        let mut right = vec![60u8; w * h];
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                let t = ((x * 13 + y * 7) % 29) as u8;
+                if inside(x, y, 650) {
+                    left[y as usize * w + x as usize] =
+                        100 + ((x - 650 + 700) * 13 % 29) as u8 + t % 3;
+                }
+                if inside(x, y, 650 - 45) {
+                    right[y as usize * w + x as usize] = 100
+                        + ((x + 45 - 650 + 700) * 13 % 29) as u8
+                        + ((x + 45) * 13 + y * 7) as u8 % 29 % 3;
+                }
+            }
+        }
+        let mut lobj: Objects<4, 1024> = Objects::new();
+        let (mut area, mut x0, mut x1) = (0u32, u32::MAX, 0u32);
+        for y in 0..h as i64 {
+            let xs: Vec<i64> = (0..w as i64).filter(|&x| inside(x, y, 650)).collect();
+            if let (Some(&a), Some(&b)) = (xs.first(), xs.last()) {
+                lobj.runs
+                    .push(Run {
+                        y: y as u16,
+                        x0: a as u16,
+                        x1: b as u16 + 1,
+                    })
+                    .unwrap();
+                area += xs.len() as u32;
+                (x0, x1) = (x0.min(a as u32), x1.max(b as u32 + 1));
+            }
+        }
+        let obj = Object {
+            bbox: Roi::new(x0, 50, x1 - x0, 501),
+            obb: OrientedBox {
+                cx: 650.0,
+                cy: 300.0,
+                half_w: 600.0,
+                half_h: 250.0,
+                angle: 0.0,
+            },
+            area,
+            runs: RunSpan {
+                start: 0,
+                len: lobj.runs.len() as u32,
+            },
+            ..Object::default()
+        };
+        let (l, r) = (
+            ImageView::packed(&left, w, h).unwrap(),
+            ImageView::packed(&right, w, h).unwrap(),
+        );
+        let mut ops = 0u64;
+        let sc = search_object(&l, &r, &obj, lobj.runs_of(&obj), 0.0, 100.0, &mut ops).unwrap();
+        assert_eq!(sc.d, 45);
+        let template: u64 = template(lobj.runs_of(&obj), 62, w as u32)
+            .map(|s| (s.x1 - s.x0) as u64)
+            .sum();
+        assert!(template > 8 * SCAN_BUDGET, "{template}");
+        // 101 scan disparities of about SCAN_BUDGET pixels, 3 whole templates
+        let bound = 101 * SCAN_BUDGET * 11 / 10 + 3 * template;
+        assert!(ops <= bound, "{ops} > {bound}");
+        assert!(ops >= 3 * template, "{ops}");
     }
 
     proptest! {

@@ -77,11 +77,13 @@ pub fn search_object(
     }
     let m = ((obj.h_o / 4.0).floor() as i64).max(4);
     let t = template(obj, m, l.w as i64);
+    // the scan's rows: every 4th, every 4k-th for templates over 8 · 16384 pixels
+    let rows = 4 * ((t.len() as i64 + 8 * 16_384 - 1) / (8 * 16_384)).max(1);
     let span = hi - lo + 1;
     let step = ((span + MAX_SCAN - 1) / MAX_SCAN).max(1);
     let scan: Vec<(i64, f64)> = (lo..=hi)
         .step_by(step as usize)
-        .filter_map(|d| Some((d, cost(l, r, &t, d, (2, 4))?)))
+        .filter_map(|d| Some((d, cost(l, r, &t, d, (2, rows))?)))
         .collect();
     // the first of equal minima
     let mut coarse = *scan.first()?;
