@@ -375,3 +375,97 @@ fn occlusion_shares_a_right_blob() {
         "{d:?}"
     );
 }
+
+/// The epipolar search (`core::epipolar`): fish the right segmentation
+/// "missed" (their masks left out of the right objects) are found at
+/// their disparity, a fish seen in the left view only stays unpaired, and
+/// the core agrees with the f64 reference (`reference::epipolar`) pair
+/// for pair.
+#[test]
+fn epipolar_search_finds_fish_missing_from_the_right_objects_like_the_reference() {
+    use fishtrack::reference::{epipolar as re, stereo as rs};
+    use fishtrack_core::epipolar::{search_unpaired, SEARCHED_LEVEL};
+    let sc = Scene::new(1024, 640);
+    let a = fish_at(-380.0, -150.0, 1600.0, [1.0, 0.1, 0.15], 280.0, 110.0, 1);
+    let b = fish_at(-150.0, 70.0, 2200.0, [1.0, -0.05, -0.1], 350.0, 110.0, 2);
+    let c = fish_at(-150.0, -30.0, 1300.0, [1.0, 0.2, 0.0], 250.0, 110.0, 3);
+    // only in the left view
+    let d = fish_at(-300.0, 220.0, 2400.0, [1.0, 0.0, 0.1], 300.0, 110.0, 4);
+    let with_left = render(&sc, &[a, b, c, d]);
+    let with_right = render(&sc, &[a, b, c]);
+    let (w, h) = (sc.w, sc.h);
+    let lm: Vec<&Vec<bool>> = (0..4).map(|k| &with_left.masks[k][1]).collect();
+    let left = objects(&with_left.left, &lm, w, h);
+    // the right segmentation found a only
+    let mut right = objects(&with_right.right, &[&with_right.masks[0][3]], w, h);
+    let lv = ImageView::packed(&with_left.left, w, h).unwrap();
+    let rv = ImageView::packed(&with_right.right, w, h).unwrap();
+    let geom = sc.geometry();
+    let limits = PairingLimits::default();
+    let mut pairs = pair_objects(&lv, &rv, &left, &right, &geom, &limits).unwrap();
+    assert_eq!(pairs.pairs.len(), 1);
+    // the reference, from the same objects
+    let (gl, gr) = (
+        rs::Gray {
+            data: &with_left.left,
+            w,
+            h,
+        },
+        rs::Gray {
+            data: &with_right.right,
+            w,
+            h,
+        },
+    );
+    let (rl, mut rr) = (rs::ref_objects(&left), rs::ref_objects(&right));
+    let rgeom = rs::Geometry::from_core(&geom);
+    let mut rpairs = rs::pair(&gl, &gr, &rl, &rr, &rgeom, &rs::Limits::from(&limits));
+    search_unpaired(&lv, &rv, &left, &mut right, &mut pairs, &geom, &limits);
+    re::search_unpaired(
+        &gl,
+        &gr,
+        &rl,
+        &mut rr,
+        &mut rpairs,
+        &rgeom,
+        &rs::Limits::from(&limits),
+    );
+    let core: Vec<(usize, usize, f64, bool)> = pairs
+        .pairs
+        .iter()
+        .map(|p| (p.left as usize, p.right as usize, p.d_o as f64, p.searched))
+        .collect();
+    let reference: Vec<(usize, usize, f64, bool)> = rpairs
+        .iter()
+        .map(|p| (p.left, p.right, p.d_o, p.searched))
+        .collect();
+    println!(
+        "core {core:?}\nreference {reference:?}\nstats {:?}",
+        pairs.stats
+    );
+    assert_eq!(core, reference);
+    // a by its blocks, b and c by the search, d unpaired
+    let got: Vec<(usize, bool)> = core.iter().map(|c| (c.0, c.3)).collect();
+    assert_eq!(got, vec![(0, false), (1, true), (2, true)]);
+    assert_eq!(pairs.stats.searched, 2);
+    for p in pairs.pairs.iter().filter(|p| p.searched) {
+        let ro = right.items[p.right as usize];
+        assert_eq!(ro.level, SEARCHED_LEVEL);
+        // the found box against the fish's own right mask
+        let mut truth = Objs::new();
+        push_object(
+            &mut truth,
+            &with_right.right,
+            &with_right.masks[p.left as usize][3],
+            w,
+            h,
+        );
+        let iou = ro.bbox.iou(&truth.items[0].bbox);
+        assert!(iou >= 0.8, "fish {}: IoU {iou}", p.left);
+        let rb = rr[p.right as usize].bbox;
+        assert_eq!(
+            (rb.0 as u32, rb.1 as u32, rb.2 as u32, rb.3 as u32),
+            (ro.bbox.x, ro.bbox.y, ro.bbox.w, ro.bbox.h)
+        );
+    }
+}
