@@ -111,7 +111,7 @@ struct Seg {
 /// column, as segmentation writes them; an unsorted mask only merges less).
 fn template<'a>(runs: &'a [Run], m: u32, width: u32) -> impl Iterator<Item = Seg> + 'a {
     let mut it = runs.iter().filter(|r| !r.is_empty()).peekable();
-    core::iter::from_fn(move || {
+    core::iter::from_fn(move || loop {
         let r = it.next()?;
         let y = r.y as u32;
         let x0 = (r.x0 as u32).saturating_sub(m);
@@ -124,7 +124,10 @@ fn template<'a>(runs: &'a [Run], m: u32, width: u32) -> impl Iterator<Item = Seg
                 break;
             }
         }
-        Some(Seg { y, x0, x1 })
+        // a run beyond the frame's right edge leaves nothing
+        if x1 > x0 {
+            return Some(Seg { y, x0, x1 });
+        }
     })
 }
 
@@ -222,7 +225,7 @@ pub fn search_object(
     }
     let m = ((obj.obb.half_h * 0.5) as u32).max(4);
     let pixels: u64 = template(runs, m, left.width() as u32)
-        .map(|s| (s.x1 - s.x0) as u64)
+        .map(|s| s.x1.saturating_sub(s.x0) as u64)
         .sum();
     let k = pixels.div_ceil(8 * SCAN_BUDGET).max(1);
     let lattice = (
