@@ -72,6 +72,9 @@ pub struct Mark {
     pub obb: OrientedBox,
     /// Paired right object's upright box, rectified right pixels.
     pub right_box: Option<Roi>,
+    /// The right box was found by the epipolar search, not segmented
+    /// (`fishtrack_core::epipolar`): drawn thin and labelled `searched`.
+    pub searched: bool,
 }
 
 /// A frame a track bridged by prediction.
@@ -135,6 +138,7 @@ pub fn marks_from_events(events: &[PipelineEvent], fish: &[FishOut]) -> BTreeMap
                 track: owner.get(&(frame, index)).copied(),
                 obb,
                 right_box: stereo.map(|s| s.right_box),
+                searched: stereo.is_some_and(|s| s.pair.searched),
             });
         }
     }
@@ -281,7 +285,20 @@ pub fn render(
         let t = if m.track.is_some() { thick } else { 1 };
         polygon(&mut img, &quad(obb_corners(&m.obb, 0.0), 0.0), colour, t);
         if let Some(rb) = &m.right_box {
-            polygon(&mut img, &quad(roi_corners(rb, 0.0), rx), colour, t);
+            let corners = quad(roi_corners(rb, 0.0), rx);
+            if m.searched {
+                polygon(&mut img, &corners, colour, 1);
+                label(
+                    &mut img,
+                    &lab,
+                    corners[0].0,
+                    corners[0].1,
+                    colour,
+                    "searched",
+                );
+            } else {
+                polygon(&mut img, &corners, colour, t);
+            }
             let rc = (
                 rb.x as f32 + rb.w as f32 / 2.0 - 0.5,
                 rb.y as f32 + rb.h as f32 / 2.0 - 0.5,
@@ -412,6 +429,7 @@ mod tests {
                     angle: 0.0,
                 },
                 right_box: None,
+                searched: false,
             }],
             predicted: vec![],
         };
@@ -506,6 +524,7 @@ mod tests {
                     w: 40,
                     h: 16,
                 }),
+                searched: false,
             }],
             predicted: vec![],
         };
@@ -533,5 +552,45 @@ mod tests {
             })
             .count();
         assert!(lit > 10, "label pixels {lit}");
+    }
+
+    #[test]
+    fn a_searched_right_box_is_labelled_in_the_right_view() {
+        let (w, h) = (128u32, 96u32);
+        let grey = GrayImage::from_pixel(w, h, image::Luma([20]));
+        let lit_right = |searched: bool| {
+            let marks = FrameMarks {
+                objects: vec![Mark {
+                    track: Some(3),
+                    obb: OrientedBox {
+                        cx: 64.0,
+                        cy: 60.0,
+                        half_w: 20.0,
+                        half_h: 8.0,
+                        angle: 0.0,
+                    },
+                    right_box: Some(Roi {
+                        x: 30,
+                        y: 52,
+                        w: 40,
+                        h: 16,
+                    }),
+                    searched,
+                }],
+                predicted: vec![],
+            };
+            let img = render(7, &grey, &grey, &marks, &BTreeMap::new(), &font());
+            let (rx, header) = (w + 4, 11 + 8);
+            // label pixels (the track's red) above the right box
+            (header..50 + header)
+                .flat_map(|y| (rx..rx + w).map(move |x| (x, y)))
+                .filter(|&(x, y)| {
+                    let [r, g, _] = img.get_pixel(x, y).0;
+                    r > 80 && g < r / 2
+                })
+                .count()
+        };
+        assert!(lit_right(true) > 10, "{}", lit_right(true));
+        assert_eq!(lit_right(false), 0);
     }
 }
