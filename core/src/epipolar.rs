@@ -21,11 +21,11 @@
 //!   lies in the image, at least 90 % of them.
 //! - Scan: every other column of every fourth template row (an eighth of
 //!   its pixels; fewer rows for templates over 8 · [`SCAN_BUDGET`] pixels,
-//!   so that a scan step compares at most `SCAN_BUDGET`) at every disparity (in steps when the range holds more
-//!   than [`MAX_SCAN`] of them), then the whole template at the scan's best
-//!   and its neighbours within a step. (Disparity steps of 2 missed a
-//!   finely textured fish whose cost has a basin one disparity wide, which
-//!   a unit test keeps.)
+//!   so that a scan step compares about `SCAN_BUDGET`) at every disparity
+//!   (in steps when the range holds more than [`MAX_SCAN`] of them), then
+//!   the whole template at the scan's best and its neighbours within a
+//!   step. (Disparity steps of 2 missed a finely textured fish whose cost
+//!   has a basin one disparity wide, which a unit test keeps.)
 //! - Acceptance: the best cost must stand out from the scan — at most
 //!   [`PairingLimits::search_max_ratio`] of the scan's median cost (the
 //!   template over water and unrelated clutter), and at most
@@ -39,16 +39,18 @@
 //! histogram measured on the right image under it, and a pair flagged
 //! [`StereoPair::searched`] with `d_o = d`, `μ_SAD` the mean of the 4
 //! object-height blocks' SADs at `d` (eq. 15's normaliser), and every block
-//! at `d`. Lengths then go through the same end validation, refinement and
-//! consistency gate as any pair ([`crate::length`]).
+//! at `d`. Its length is measured as any pair's ([`crate::length`]) but
+//! withheld (the pipeline marks it not consistent): the right mask is the
+//! left one shifted, so the consistency gate has no second view to check.
 //!
 //! Bounded work: per unpaired left object at most [`MAX_SCAN`] scan
 //! disparities of about [`SCAN_BUDGET`] pixels each (every `4k`-th row:
-//! exact for rows of equal length), plus `2·step + 1` whole-template ones; every
-//! difference is counted in [`crate::stereo::PairingStats::sad_ops`].
-//! Memory: the scan's disparities and costs (`MAX_SCAN` of them, 8 KiB) and a 511-bin histogram
-//! on the stack; no heap. A right object that does not fit the object or run
-//! capacity is not added (the left object stays unpaired, counted).
+//! exact for rows of equal length), plus `2·step + 1` whole-template ones;
+//! every difference is counted in [`crate::stereo::PairingStats::sad_ops`].
+//! Memory: the scan's disparities and costs (`MAX_SCAN` of them, 8 KiB)
+//! and a 511-bin histogram on the stack; no heap. A right object that does
+//! not fit the object or run capacity is not added (the left object stays
+//! unpaired, counted).
 
 use crate::geometry::StereoGeometry;
 use crate::image::{ImageView, Roi};
@@ -64,7 +66,7 @@ pub const MAX_SCAN: usize = 1024;
 
 /// The scan's pixel lattice (every `.0`-th column of every `.1`-th row)
 /// for templates of up to `8 ·` [`SCAN_BUDGET`] pixels; larger ones take
-/// every `4k`-th row so the scan compares at most `SCAN_BUDGET` pixels per
+/// every `4k`-th row so the scan compares about `SCAN_BUDGET` pixels per
 /// disparity.
 const SCAN_LATTICE: (u32, u32) = (2, 4);
 
@@ -219,7 +221,9 @@ pub fn search_object(
     ops: &mut u64,
 ) -> Option<SearchScore> {
     let lo = (micromath::F32(d_lo).ceil().0 as i32).max(0);
-    let hi = micromath::F32(d_hi).floor().0 as i32;
+    // no pixel has a counterpart beyond the frame's width (and the scan's
+    // `d += step` cannot run past i32::MAX)
+    let hi = (micromath::F32(d_hi).floor().0 as i32).min(left.width().min(1 << 30) as i32);
     if hi < lo || runs.is_empty() {
         return None;
     }
@@ -647,6 +651,39 @@ mod tests {
                 "{fast} {plain}"
             );
         }
+    }
+
+    #[test]
+    fn a_degenerate_geometry_neither_hangs_nor_panics() {
+        let s = scene(&[37]);
+        let l = ImageView::packed(&s.left, W, H).unwrap();
+        let r = ImageView::packed(&s.right, W, H).unwrap();
+        let o = s.lobj.items[0];
+        let mut ops = 0;
+        // disparity ranges of a bad calibration: enormous, inverted, NaN
+        for (lo, hi) in [
+            (0.0, 1e12),
+            (-1e12, 1e12),
+            (50.0, 10.0),
+            (f32::NAN, f32::NAN),
+        ] {
+            let _ = search_object(&l, &r, &o, s.lobj.runs_of(&o), lo, hi, &mut ops);
+        }
+        let g = StereoGeometry {
+            baseline_mm: 1e12,
+            ..geom()
+        };
+        let (mut robj, mut pairs) = (Objects::<8, 512>::new(), StereoPairs::<8>::default());
+        search_unpaired(
+            &l,
+            &r,
+            &s.lobj,
+            &mut robj,
+            &mut pairs,
+            &g,
+            &PairingLimits::default(),
+        );
+        assert!(pairs.pairs.len() <= 1);
     }
 
     #[test]

@@ -71,7 +71,10 @@ pub fn search_object(
 ) -> Option<(i64, f64, f64, f64)> {
     let d_lo = geom.disparity_at_depth(lim.max_range) - lim.slack;
     let d_hi = geom.disparity_at_depth(lim.min_range) + lim.slack;
-    let (lo, hi) = ((d_lo.ceil() as i64).max(0), d_hi.floor() as i64);
+    let (lo, hi) = (
+        (d_lo.ceil() as i64).max(0),
+        (d_hi.floor() as i64).min(l.w as i64),
+    );
     if hi < lo || obj.pixels.is_empty() {
         return None;
     }
