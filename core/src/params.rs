@@ -153,6 +153,12 @@ pub struct Params {
     /// backscatter or strobe haze rises smoothly, so its thresholded
     /// outline sits on a slope. 0 turns the test off. Default 0.3.
     pub edge_step_ratio: f32,
+    /// Edge test: the inner and outer samples lie this many pixels in from
+    /// the outline and beyond the first pixel out, so a step spans
+    /// `2·edge_gap + 2` pixels. 2 at 2048 px wide, scaled with the frame
+    /// width (at least 1): at 1024², with a fixed 2, a step spanned twice
+    /// as much of a smooth glow, and debris glows passed (session 23).
+    pub edge_gap: u8,
 
     /// Whether the right view is matched to the left's grey levels before
     /// the stereo pairing and the length are computed again on it, when
@@ -218,6 +224,7 @@ impl Default for Params {
             dim_level: true,
             high_floor_sigmas: 2.0,
             edge_step_ratio: 0.3,
+            edge_gap: 2,
             photometric: true,
             stereo_search: true,
             v_ref_x: -1.0,
@@ -268,6 +275,7 @@ impl Params {
         self.area_max = ((self.area_max as f32 * s2) as u32).max(self.area_min);
         self.margin = ((self.margin as f32 * s) as u32).max(1);
         self.background_radius = (libm::roundf(self.background_radius as f32 * s) as u8).max(1);
+        self.edge_gap = (libm::roundf(self.edge_gap as f32 * s) as u8).max(1);
         if width < 1024 {
             self.mesh_line_len = odd_at_least_3(self.mesh_line_len as f32 * s * 2.0);
             self.disk_size = odd_at_least_3(self.disk_size as f32 * s * 2.0);
@@ -382,6 +390,7 @@ impl Params {
             (0.0..=1.0).contains(&self.edge_step_ratio),
             "0 to 1",
         )?;
+        range("edge_gap", (1..=16).contains(&self.edge_gap), "1 to 16")?;
         range(
             "background_radius",
             (1..=32).contains(&self.background_radius),

@@ -802,7 +802,7 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                 m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
                 m.to_words(&mut rec[..10]);
                 if edge_test {
-                    let e = edge_steps(sv, a, spans, (rw, rh), j, i0..i1);
+                    let e = edge_steps(sv, a, spans, (rw, rh), j, i0..i1, params.edge_gap as usize);
                     rec[28] = rec[28].wrapping_add(e.sum as u64);
                     rec[29] += e.count;
                     rec[30] += e.seen;
@@ -877,7 +877,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
 /// How far inside and outside the outline the edge test samples, pixels:
 /// the inner sample is `EDGE_GAP` pixels in from the outline pixel, the
 /// outer one `EDGE_GAP` pixels beyond the first pixel out, so that the
-/// step spans a blurred edge (`2·EDGE_GAP + 2` pixels).
+/// step spans a blurred edge (`2·EDGE_GAP + 2` pixels). The default at
+/// 2048 px wide; `Params::edge_gap` scales it with the frame.
 pub const EDGE_GAP: usize = 2;
 
 /// Fewest outline samples for the edge test to judge an object (fewer:
@@ -926,7 +927,7 @@ pub fn edge_sharp_enough(e: &EdgeSteps, w_med: u8, ratio: f32) -> bool {
 /// - each pixel `(x, j)` whose pixel below is outside the mask: inner
 ///   `(x, j − g)`, outer `(x, j + 1 + g)`; above, mirrored;
 ///
-/// with `g` = [`EDGE_GAP`]; both pixels inside the ellipse (`spans`: the
+/// with `g` = `Params::edge_gap` ([`EDGE_GAP`] at 2048 px); both pixels inside the ellipse (`spans`: the
 /// thresholded pixels are defined there), the inner one in the mask, the
 /// outer one outside it and above 0 (0 is what the dim level cleared:
 /// another fish, not water).
@@ -937,8 +938,8 @@ fn edge_steps(
     (rw, rh): (usize, usize),
     j: usize,
     cols: core::ops::Range<usize>,
+    g: usize,
 ) -> EdgeSteps {
-    let g = EDGE_GAP;
     let (i0, i1) = (cols.start, cols.end);
     let inside = |jj: usize, x: usize| mask.get(jj * rw + x).is_some_and(|&v| v != 0);
     let in_span = |jj: usize, x: usize| {

@@ -776,7 +776,15 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 }
                 if p.edge_step_ratio > 0.0
                     && !p.split_merged
-                    && !edge_sharp(comp, &post, &ins, &at, (rw, rh), w_med, p.edge_step_ratio)
+                    && !edge_sharp(
+                        comp,
+                        &post,
+                        &ins,
+                        &at,
+                        (rw, rh),
+                        w_med,
+                        (p.edge_step_ratio, p.edge_gap),
+                    )
                 {
                     continue;
                 }
@@ -825,10 +833,10 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
 }
 
 /// The edge test (core: `segment::local::edge_sharp_enough`): over the
-/// object's outline, pixel by pixel, the step from the pixel `EDGE_GAP`
-/// inside to the one `EDGE_GAP` beyond the first pixel outside, along
-/// rows (at a row's first and last object pixel, when the object's run
-/// there is longer than `EDGE_GAP`) and columns (each object pixel whose
+/// object's outline, pixel by pixel, the step from the pixel `gap`
+/// (`Params::edge_gap`) inside to the one `gap` beyond the first pixel
+/// outside, along rows (at a row's first and last object pixel, when the
+/// object's run there is longer than `gap`) and columns (each object pixel whose
 /// pixel below, or above, is not in the mask); both inside the ellipse,
 /// the inner pixel in `mask`, the outer one outside it and above 0
 /// (cleared by the dim level). The mean step must reach `ratio` times the
@@ -841,10 +849,10 @@ fn edge_sharp(
     at: &dyn Fn(u32) -> u8,
     (rw, rh): (u32, u32),
     w_med: f64,
-    ratio: f32,
+    (ratio, gap): (f32, u8),
 ) -> bool {
-    use fishtrack_core::segment::local::{EDGE_GAP, EDGE_MIN_SAMPLES};
-    let g = EDGE_GAP as i64;
+    use fishtrack_core::segment::local::EDGE_MIN_SAMPLES;
+    let g = gap as i64;
     let (w, h) = (rw as i64, rh as i64);
     let in_mask = |x: i64, y: i64| {
         x >= 0 && y >= 0 && x < w && y < h && mask.get_pixel(x as u32, y as u32).0[0] > 0
