@@ -455,6 +455,11 @@ mod tests {
         assert_eq!(q.area_min, 125);
         assert_eq!(q.margin, 25);
         assert_eq!(q.disk_size, 5); // 7 · (512/1024) = 3.5 → 4 → next odd 5
+                                    // the edge test's gap: 2 px at 2048, 1 at 1024 and below, 4 at 4096
+        assert_eq!(p.edge_gap, 1);
+        assert_eq!(q.edge_gap, 1);
+        assert_eq!(Params::for_frame(4096).edge_gap, 4);
+        assert_eq!(Params::for_frame(3072).edge_gap, 3);
         assert_eq!(q.validate(), Ok(()));
         assert_eq!(Params::for_frame(2048), Params::default());
     }

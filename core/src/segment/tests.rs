@@ -614,6 +614,36 @@ fn smooth_glow_is_not_a_fish_and_a_sharp_one_is() {
 }
 
 #[test]
+#[cfg_attr(miri, ignore)]
+fn the_edge_gap_follows_the_frame_so_a_smaller_glow_is_still_refused() {
+    // a glow of half the size of `smooth_glow_is_not_a_fish_and_a_sharp_one_is`'s,
+    // as the same scene rendered at half the resolution: the scaled gap
+    // (Params::for_frame) still refuses it; a fixed 2-px gap spans twice as
+    // much of its slope and lets it through (the 1024² debris of session 23)
+    let (w, h) = (512, 512);
+    let (cx, cy, a, b, angle, peak) = (256.0, 256.0, 30.0, 11.0, -0.4, 14.0);
+    let glow = |x: f32, y: f32| {
+        let (u, v) = axes(x, y, cx, cy, angle);
+        peak * (-(u * u / (a * a) + v * v / (b * b)) * 2.0).exp()
+    };
+    let objects = |img: &[u8], gap: u8| {
+        let mut p = Params::for_frame(1024);
+        p.edge_gap = gap;
+        let mut out: Objects<32, 8192> = Objects::new();
+        run(img, w, h, &p, &mut out);
+        out.items.len()
+    };
+    let scaled = Params::for_frame(1024).edge_gap;
+    let (mut refused, mut passed_fixed) = (0, 0);
+    for seed in 1..=4u64 {
+        let g = water_with(w, h, 1.5, seed, glow);
+        refused += (objects(&g, scaled) == 0) as u32;
+        passed_fixed += (objects(&g, 2) == 1) as u32;
+    }
+    assert_eq!((scaled, refused, passed_fixed), (1, 4, 4));
+}
+
+#[test]
 fn edge_test_judges_only_what_it_can() {
     use super::local::{edge_sharp_enough, EdgeSteps, EDGE_MIN_SAMPLES};
     let e = |sum, count, seen, seen_count| EdgeSteps {
