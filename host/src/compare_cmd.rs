@@ -155,7 +155,10 @@ pub fn run(dir: &Path) -> Result<()> {
         let reference_raw: Vec<PairLength<rs::RefLength>> = ref_pairs
             .iter()
             .map(|p| {
-                // lengths are measured for pairs wholly inside both views only
+                // lengths are measured for pairs wholly inside both views
+                // only (the core's right objects, searched ones included,
+                // have the reference's indices wherever the pair sets agree,
+                // which `pairs` below checks)
                 let inside = match (
                     pipe.left_objects().items.get(p.left),
                     pipe.right_objects().items.get(p.right),
