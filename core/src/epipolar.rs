@@ -515,13 +515,20 @@ mod tests {
         }
     }
 
-    /// The left object of a fish painted at `(cx, cy)`.
-    fn fish_object(objs: &mut Objects<8, 512>, cx: i64, cy: i64) {
+    /// Adds the object whose mask is `inside` on a `w × h` frame (one run
+    /// per row, from its first to its last pixel) with the oriented box
+    /// `obb`; box and area from the runs.
+    fn push_object<const N: usize, const R: usize>(
+        objs: &mut Objects<N, R>,
+        (w, h): (usize, usize),
+        inside: impl Fn(i64, i64) -> bool,
+        obb: OrientedBox,
+    ) {
         let start = objs.runs.len() as u32;
         let (mut x0, mut y0, mut x1, mut y1) = (i64::MAX, i64::MAX, 0, 0);
         let mut area = 0u32;
-        for y in 0..H as i64 {
-            let xs: Vec<i64> = (0..W as i64).filter(|&x| in_fish(x, y, cx, cy)).collect();
+        for y in 0..h as i64 {
+            let xs: Vec<i64> = (0..w as i64).filter(|&x| inside(x, y)).collect();
             if let (Some(&a), Some(&b)) = (xs.first(), xs.last()) {
                 objs.runs
                     .push(Run {
@@ -538,18 +545,24 @@ mod tests {
         objs.items
             .push(Object {
                 bbox: Roi::new(x0 as u32, y0 as u32, (x1 - x0) as u32, (y1 - y0) as u32),
-                obb: OrientedBox {
-                    cx: cx as f32,
-                    cy: cy as f32,
-                    half_w: 50.0,
-                    half_h: 15.0,
-                    angle: 0.0,
-                },
+                obb,
                 area,
                 runs: RunSpan { start, len },
                 ..Object::default()
             })
             .unwrap();
+    }
+
+    /// The left object of a fish painted at `(cx, cy)`.
+    fn fish_object(objs: &mut Objects<8, 512>, cx: i64, cy: i64) {
+        let obb = OrientedBox {
+            cx: cx as f32,
+            cy: cy as f32,
+            half_w: 50.0,
+            half_h: 15.0,
+            angle: 0.0,
+        };
+        push_object(objs, (W, H), |x, y| in_fish(x, y, cx, cy), obb);
     }
 
     struct Scene {
@@ -760,54 +773,28 @@ mod tests {
             let (u, v) = ((x - cx) as f32 / 600.0, (y - 300) as f32 / 250.0);
             u * u + v * v <= 1.0
         };
-        let mut left = vec![60u8; w * h];
-        let mut right = vec![60u8; w * h];
-        for y in 0..h as i64 {
-            for x in 0..w as i64 {
-                let t = ((x * 13 + y * 7) % 29) as u8;
-                if inside(x, y, 650) {
-                    left[y as usize * w + x as usize] =
-                        100 + ((x - 650 + 700) * 13 % 29) as u8 + t % 3;
-                }
-                if inside(x, y, 650 - 45) {
-                    right[y as usize * w + x as usize] = 100
-                        + ((x + 45 - 650 + 700) * 13 % 29) as u8
-                        + ((x + 45) * 13 + y * 7) as u8 % 29 % 3;
+        // the same textured fish, at x = 650 in the left view, 605 in the right
+        let paint = |cx: i64| {
+            let mut img = vec![60u8; w * h];
+            for y in 0..h as i64 {
+                for x in (0..w as i64).filter(|&x| inside(x, y, cx)) {
+                    let t = (x - cx + 700) * 13 % 29 + ((x - cx) * 13 + y * 7).rem_euclid(29) % 3;
+                    img[y as usize * w + x as usize] = 100 + t as u8;
                 }
             }
-        }
-        let mut lobj: Objects<4, 1024> = Objects::new();
-        let (mut area, mut x0, mut x1) = (0u32, u32::MAX, 0u32);
-        for y in 0..h as i64 {
-            let xs: Vec<i64> = (0..w as i64).filter(|&x| inside(x, y, 650)).collect();
-            if let (Some(&a), Some(&b)) = (xs.first(), xs.last()) {
-                lobj.runs
-                    .push(Run {
-                        y: y as u16,
-                        x0: a as u16,
-                        x1: b as u16 + 1,
-                    })
-                    .unwrap();
-                area += xs.len() as u32;
-                (x0, x1) = (x0.min(a as u32), x1.max(b as u32 + 1));
-            }
-        }
-        let obj = Object {
-            bbox: Roi::new(x0, 50, x1 - x0, 501),
-            obb: OrientedBox {
-                cx: 650.0,
-                cy: 300.0,
-                half_w: 600.0,
-                half_h: 250.0,
-                angle: 0.0,
-            },
-            area,
-            runs: RunSpan {
-                start: 0,
-                len: lobj.runs.len() as u32,
-            },
-            ..Object::default()
+            img
         };
+        let (left, right) = (paint(650), paint(650 - 45));
+        let mut lobj: Objects<4, 1024> = Objects::new();
+        let obb = OrientedBox {
+            cx: 650.0,
+            cy: 300.0,
+            half_w: 600.0,
+            half_h: 250.0,
+            angle: 0.0,
+        };
+        push_object(&mut lobj, (w, h), |x, y| inside(x, y, 650), obb);
+        let obj = lobj.items[0];
         let (l, r) = (
             ImageView::packed(&left, w, h).unwrap(),
             ImageView::packed(&right, w, h).unwrap(),

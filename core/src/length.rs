@@ -48,7 +48,9 @@
 //!   masks end at different points of the fish (merged with a neighbour or
 //!   the mesh in one view, occluded, cropped): the length is computed but
 //!   withheld ([`FishLength::consistent`] false). A survey prefers fewer,
-//!   right lengths; the per-track median uses the consistent frames.
+//!   right lengths; the per-track median uses the consistent frames. A
+//!   pair the epipolar search found ([`StereoPair::searched`]) is always
+//!   withheld: its right mask is the left one shifted, nothing to check.
 //!
 //! Memory bound: the refinement's `B` blocks and two `B`-float work arrays
 //! on the stack; the accumulator holds `F` floats. No heap.
@@ -735,6 +737,11 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
         fe.px = (x, y);
         fe.d = d;
         fe.xyz = [p.x, p.y, p.z];
+    }
+    // a searched pair's right mask is its left one shifted
+    // (crate::epipolar): the gate above had no second view to check
+    if pair.searched {
+        out.consistent = false;
     }
     out.length_mm = (xyz[1] - xyz[0]).norm();
     if let Some(c) = geom.triangulate(cx, cy, a) {

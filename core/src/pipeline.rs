@@ -649,13 +649,7 @@ impl<
                 &self.cfg.length,
             );
             let l = match l {
-                Ok(mut v) => {
-                    // a searched pair's right mask is the left one shifted:
-                    // the consistency gate has no second view to check
-                    // against, so its length is withheld (crate::epipolar)
-                    if p.searched {
-                        v.consistent = false;
-                    }
+                Ok(v) => {
                     if !v.consistent {
                         self.stats.length_withheld = self.stats.length_withheld.saturating_add(1);
                     }

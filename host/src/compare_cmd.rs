@@ -168,14 +168,9 @@ pub fn run(dir: &Path) -> Result<()> {
                     }
                     _ => false,
                 };
-                // a searched pair's length is withheld (core::epipolar)
                 let len = inside
                     .then(|| rs::length(&lg, &rg, &lo, &ro, p, &geom, &setup.params, &cfg.length))
-                    .flatten()
-                    .map(|mut v| {
-                        v.consistent &= !p.searched;
-                        v
-                    });
+                    .flatten();
                 (p.left, p.right, len)
             })
             .collect();

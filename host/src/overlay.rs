@@ -503,12 +503,10 @@ mod tests {
         );
     }
 
-    #[test]
-    fn render_draws_boxes_in_the_track_colour_on_both_views() {
-        let (w, h) = (128u32, 96u32);
-        let left = GrayImage::from_pixel(w, h, image::Luma([20]));
-        let right = GrayImage::from_pixel(w, h, image::Luma([20]));
-        let marks = FrameMarks {
+    /// Track 3's object at (64, 60) in the left view, paired with the right
+    /// box (30, 52, 40 × 16), found by the search or not.
+    fn one_mark(searched: bool) -> FrameMarks {
+        FrameMarks {
             objects: vec![Mark {
                 track: Some(3),
                 obb: OrientedBox {
@@ -524,10 +522,18 @@ mod tests {
                     w: 40,
                     h: 16,
                 }),
-                searched: false,
+                searched,
             }],
             predicted: vec![],
-        };
+        }
+    }
+
+    #[test]
+    fn render_draws_boxes_in_the_track_colour_on_both_views() {
+        let (w, h) = (128u32, 96u32);
+        let left = GrayImage::from_pixel(w, h, image::Luma([20]));
+        let right = GrayImage::from_pixel(w, h, image::Luma([20]));
+        let marks = one_mark(false);
         let lengths = BTreeMap::from([(3, Some(412.4))]);
         let img = render(7, &left, &right, &marks, &lengths, &font());
         let gap = 4;
@@ -559,26 +565,7 @@ mod tests {
         let (w, h) = (128u32, 96u32);
         let grey = GrayImage::from_pixel(w, h, image::Luma([20]));
         let lit_right = |searched: bool| {
-            let marks = FrameMarks {
-                objects: vec![Mark {
-                    track: Some(3),
-                    obb: OrientedBox {
-                        cx: 64.0,
-                        cy: 60.0,
-                        half_w: 20.0,
-                        half_h: 8.0,
-                        angle: 0.0,
-                    },
-                    right_box: Some(Roi {
-                        x: 30,
-                        y: 52,
-                        w: 40,
-                        h: 16,
-                    }),
-                    searched,
-                }],
-                predicted: vec![],
-            };
+            let marks = one_mark(searched);
             let img = render(7, &grey, &grey, &marks, &BTreeMap::new(), &font());
             let (rx, header) = (w + 4, 11 + 8);
             // label pixels (the track's red) above the right box

@@ -462,6 +462,31 @@ fn epipolar_search_finds_fish_missing_from_the_right_objects_like_the_reference(
         );
         let iou = ro.bbox.iou(&truth.items[0].bbox);
         assert!(iou >= 0.8, "fish {}: IoU {iou}", p.left);
+        // measured, but withheld by the length stage, core and reference
+        let cl = measure_length::<N, R, 1024>(
+            &lv,
+            &rv,
+            &left,
+            &right,
+            p,
+            &geom,
+            &Params::default(),
+            &LengthConfig::default(),
+        )
+        .unwrap();
+        assert!(!cl.consistent && cl.length_mm > 0.0);
+        let rp = rpairs.iter().find(|q| q.left == p.left as usize).unwrap();
+        let rlen = rs::length(
+            &gl,
+            &gr,
+            &rl,
+            &rr,
+            rp,
+            &rgeom,
+            &Params::default(),
+            &LengthConfig::default(),
+        );
+        assert!(rlen.is_some_and(|v| !v.consistent));
         let rb = rr[p.right as usize].bbox;
         assert_eq!(
             (rb.0 as u32, rb.1 as u32, rb.2 as u32, rb.3 as u32),

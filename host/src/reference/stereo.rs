@@ -975,7 +975,8 @@ pub fn length(
         length: (ends[1] - ends[0]).norm(),
         ends,
         compensated: comp,
-        consistent,
+        // a searched pair's right mask is its left one shifted: withheld
+        consistent: consistent && !p.searched,
     })
 }
 
