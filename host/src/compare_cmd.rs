@@ -61,6 +61,7 @@ pub fn run(dir: &Path) -> Result<()> {
     let geom = Geometry::from_core(&setup.geometry);
     let limits = Limits::from(&cfg.pairing);
     let (mut seg, mut pairs, mut lengths) = (Tally::default(), Tally::default(), Tally::default());
+    let mut disparities = Tally::default();
     let mut raw_lengths = Tally::default();
     let mut all_obs = Vec::new();
     let mut photo_pool = rp::Pool::default();
@@ -220,6 +221,31 @@ pub fn run(dir: &Path) -> Result<()> {
                 )
             },
         );
+        // the coarse disparity d_o of every pair both sides made (the
+        // tracker's depth cue): the same candidate, to the core's integer
+        // shift
+        let mut worst_d = 0.0f64;
+        let mut first_d = None;
+        for p in pipe.pairs().pairs.iter() {
+            let Some(q) = ref_pairs
+                .iter()
+                .find(|q| q.left == p.left as usize && q.right == p.right as usize)
+            else {
+                continue;
+            };
+            let diff = (p.d_o as f64 - q.d_o).abs();
+            if diff > worst_d {
+                worst_d = diff;
+                first_d = Some((p.left, p.right, p.d_o, q.d_o));
+            }
+        }
+        disparities.add(worst_d <= 1.0, worst_d, || {
+            let (l, r, c, q) = first_d.unwrap_or_default();
+            format!(
+                "frame {}: pair ({l}, {r}) d_o core {c}, reference {q}",
+                pair.index
+            )
+        });
         pairs.add(a.pairs_identical, 0.0, || {
             format!(
                 "frame {}: core pairs {:?}, reference pairs {:?}",
@@ -278,6 +304,11 @@ pub fn run(dir: &Path) -> Result<()> {
     );
     line("stereo pairs identical", &pairs, "-".into());
     line(
+        "coarse disparities d_o within 1 px",
+        &disparities,
+        format!("{worst_d:.1} px", worst_d = disparities.worst),
+    );
+    line(
         "stereo lengths within 0.5 %",
         &lengths,
         format!("{:.3} %", 100.0 * lengths.worst),
@@ -298,6 +329,7 @@ pub fn run(dir: &Path) -> Result<()> {
     for (name, t) in [
         ("segmentation", &seg),
         ("stereo pairs", &pairs),
+        ("coarse disparities", &disparities),
         ("stereo lengths", &lengths),
         ("withheld stereo lengths", &raw_lengths),
     ] {

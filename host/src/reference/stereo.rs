@@ -230,6 +230,22 @@ pub struct RefPair {
 /// against the right image `d` pixels to the left; `None` when fewer than
 /// half of the pixels have a right counterpart.
 pub(crate) fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option<f64> {
+    sad_need(l, r, x0, x1, y0, y1, d, usize::MAX)
+}
+
+/// [`sad`] accepting the comparison when at least half of `min(box pixels,
+/// need)` pixels have a right counterpart (see [`zsad`]).
+#[allow(clippy::too_many_arguments)]
+fn sad_need(
+    l: &Gray,
+    r: &Gray,
+    x0: i64,
+    x1: i64,
+    y0: i64,
+    y1: i64,
+    d: i64,
+    need: usize,
+) -> Option<f64> {
     let x1 = x1.min(l.w as i64);
     let y1 = y1.min(l.h as i64);
     if x1 <= x0 || y1 <= y0 {
@@ -244,7 +260,7 @@ pub(crate) fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64
             }
         }
     }
-    let total = ((x1 - x0) * (y1 - y0)) as usize;
+    let total = (((x1 - x0) * (y1 - y0)) as usize).min(need);
     if n == 0 || 2 * n < total {
         None
     } else {
@@ -254,7 +270,22 @@ pub(crate) fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64
 
 /// Zero-mean SAD per pixel over the pixels [`sad`] compares: the mean
 /// difference of the two windows taken out (core: `stereo::zsad_per_pixel`).
-fn zsad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option<f64> {
+///
+/// The comparison is accepted when at least half of `min(box pixels,
+/// need)` pixels have a right counterpart: `need` is the right box's
+/// pixels in the shared rows, all the right camera shows of an object the
+/// left image's left border cuts (core: `stereo::zsad_whole`).
+#[allow(clippy::too_many_arguments)]
+fn zsad(
+    l: &Gray,
+    r: &Gray,
+    x0: i64,
+    x1: i64,
+    y0: i64,
+    y1: i64,
+    d: i64,
+    need: usize,
+) -> Option<f64> {
     let x1 = x1.min(l.w as i64);
     let y1 = y1.min(l.h as i64);
     if x1 <= x0 || y1 <= y0 {
@@ -268,7 +299,7 @@ fn zsad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Optio
             }
         }
     }
-    let total = ((x1 - x0) * (y1 - y0)) as usize;
+    let total = (((x1 - x0) * (y1 - y0)) as usize).min(need);
     if diffs.is_empty() || 2 * diffs.len() < total {
         return None;
     }
@@ -333,14 +364,18 @@ fn match_boxes(
     let mut cands: Vec<f64> = per_block.iter().map(|d| d.unwrap_or(dmean)).collect();
     cands.push((lb.0 - rb.0) as f64);
     cands.push((lb.0 + lb.2 - rb.0 - rb.2) as f64);
+    // the right box's pixels in the shared rows: what the right camera
+    // shows of an object (all of it the left border leaves, see `zsad`)
+    let rows = (y1.min(l.h as i64).min(r.h as i64) - y0).max(0);
+    let need = (((rb.0 + rb.2).min(r.w as i64) - rb.0).max(0) * rows) as usize;
     let mut best = (f64::INFINITY, dmean);
     for c in cands {
         if c < dlo || c > dhi {
             continue;
         }
         // the core truncates toward zero when it turns a candidate into a shift
-        let whole = if zero_mean { zsad } else { sad };
-        if let Some(s) = whole(l, r, lb.0, lb.0 + lb.2, y0, y1, c.trunc() as i64) {
+        let whole = if zero_mean { zsad } else { sad_need };
+        if let Some(s) = whole(l, r, lb.0, lb.0 + lb.2, y0, y1, c.trunc() as i64, need) {
             if s < best.0 {
                 best = (s, c);
             }
