@@ -151,6 +151,22 @@ fn cost_at(
     step: (u32, u32),
     ops: &mut u64,
 ) -> Option<f32> {
+    template_cost(left, right, runs, m, d, step, (MIN_COMPARED, u64::MAX), ops)
+}
+
+/// [`cost_at`] accepting a disparity when at least `need.0` of
+/// `min(template pixels, need.1)` pixels are compared.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn template_cost(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    runs: &[Run],
+    m: u32,
+    d: i32,
+    step: (u32, u32),
+    need: (f32, u64),
+    ops: &mut u64,
+) -> Option<f32> {
     let w = left.width() as u32;
     let (cs, rs) = (step.0.max(1), step.1.max(1));
     let mut hist = [0u32; 511];
@@ -178,7 +194,7 @@ fn cost_at(
         }
     }
     *ops = ops.saturating_add(n);
-    if n == 0 || (n as f32) < MIN_COMPARED * total as f32 {
+    if n == 0 || (n as f32) < need.0 * total.min(need.1) as f32 {
         return None;
     }
     Some(zero_mean_sad(&hist, n))

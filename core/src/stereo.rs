@@ -38,6 +38,15 @@
 //!   and the depth cue of the tracker then split the fish's track. It is
 //!   evaluated only for the pairs the assignment chooses
 //!   ([`CoarseCost::Deferred`]), as pairing itself needs only `μ_SAD`.
+//!   Since session 25 ([`PairingLimits::masked_d_o`], default on) that
+//!   score is taken over the left object's mask widened by `max(4,
+//!   h_o/4)` columns ([`masked_d_o`], the epipolar search's template)
+//!   rather than its upright box: a fish lying diagonally fills a small
+//!   part of its box, and on a dim fish the box's water decided the
+//!   score (seed 9, frame 10: d_o 400 px for a fish at 276, depth 1254 mm
+//!   for 1846). A shift is scored when at least half of the smaller view
+//!   is compared ([`zsad_whole`]: the left image's left border hides part
+//!   of a fish from the right camera).
 //!
 //! Cost: a candidate costs `16 · (w/4) · h = 4·w·h` absolute differences;
 //! a chosen pair adds ≤ 6 whole-box evaluations for `d_o`; [`PairingStats::sad_ops`] counts them,
@@ -86,6 +95,9 @@ pub struct PairingLimits {
     /// brighter water better than the fish itself at the plain SAD. False:
     /// the plain SAD, as the blocks.
     pub zero_mean_d_o: bool,
+    /// Score the zero-mean `d_o` candidates on the left object's widened
+    /// mask ([`masked_d_o`]) rather than its upright box.
+    pub masked_d_o: bool,
     /// Epipolar search ([`crate::epipolar`], `Params::stereo_search`): the
     /// best cost must be at most this share of the scan's median cost.
     pub search_max_ratio: f32,
@@ -104,6 +116,7 @@ impl Default for PairingLimits {
             min_size_ratio: 0.5,
             max_sad_per_pixel: 40.0,
             zero_mean_d_o: true,
+            masked_d_o: true,
             search_max_ratio: 0.7,
             search_max_runner_up: 0.85,
         }
@@ -657,6 +670,41 @@ pub fn zero_mean_d_o(
     })
 }
 
+/// The zero-mean `d_o` scored on the left object's own pixels: its mask
+/// runs widened by `max(4, h_o/4)` (the fish's outline and a little water,
+/// the epipolar search's template, [`crate::epipolar`]) instead of its
+/// upright box, which for a fish lying diagonally is mostly water. A
+/// candidate is scored when at least half of `min(template pixels, right
+/// object's area)` pixels are compared (an object the left image's left
+/// border cuts shows the right camera only its part, see [`zsad_whole`]).
+#[allow(clippy::too_many_arguments)]
+pub fn masked_d_o(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    runs: &[crate::object::Run],
+    lo: &crate::object::Object,
+    ro: &crate::object::Object,
+    m: &BlockMatch,
+    d_lo: f32,
+    d_hi: f32,
+    ops: &mut u64,
+) -> f32 {
+    let cands = d_o_candidates(&lo.bbox, &ro.bbox, &m.block_disparity);
+    let margin = ((lo.obb.half_h * 0.5) as u32).max(4);
+    choose_d_o(&cands, d_lo, d_hi, m.d_o, &mut |d| {
+        crate::epipolar::template_cost(
+            left,
+            right,
+            runs,
+            margin,
+            d,
+            (1, 1),
+            (0.5, ro.area as u64),
+            ops,
+        )
+    })
+}
+
 /// Fraction of `a` covered by `b`.
 fn covered(a: &Roi, b: &Roi) -> f32 {
     let i = a.intersect(b).area();
@@ -769,9 +817,23 @@ pub fn pair_objects<const N: usize, const R: usize>(
         m.map(|mut m| {
             if scan_cost == CoarseCost::Deferred {
                 let mut ops = 0u64;
-                m.d_o = zero_mean_d_o(
-                    left_img, right_img, lo.bbox, ro.bbox, &m, d_lo, d_hi, &mut ops,
-                );
+                m.d_o = if limits.masked_d_o {
+                    masked_d_o(
+                        left_img,
+                        right_img,
+                        left.runs_of(lo),
+                        lo,
+                        ro,
+                        &m,
+                        d_lo,
+                        d_hi,
+                        &mut ops,
+                    )
+                } else {
+                    zero_mean_d_o(
+                        left_img, right_img, lo.bbox, ro.bbox, &m, d_lo, d_hi, &mut ops,
+                    )
+                };
                 d_o_ops.set(d_o_ops.get().saturating_add(ops));
             }
             m
@@ -1255,6 +1317,131 @@ mod tests {
             assert_eq!(m.d_o, true_d as f32, "zero-mean {zero_mean}: {m:?}");
             // and the old rule (half of the left box) would have refused it
             assert!(naive_zsad(&lv, &rv, lb.x, lb.right(), 10, 30, true_d, usize::MAX).is_none());
+        }
+        // scored on the masks as well: the left mask is the whole visible
+        // fish, the right one its last 50 columns
+        let runs: Vec<crate::object::Run> = (10..30)
+            .map(|y| crate::object::Run { y, x0: 0, x1: 200 })
+            .collect();
+        let lo = object_of(lb, 20.0, 200 * 20);
+        let ro = object_of(rb, 20.0, 50 * 20);
+        let mut ops = 0u64;
+        let m = match_boxes(
+            &lv,
+            &rv,
+            lb,
+            rb,
+            10.0,
+            250.0,
+            CoarseCost::Deferred,
+            &mut ops,
+        )
+        .unwrap();
+        let d = masked_d_o(&lv, &rv, &runs, &lo, &ro, &m, 10.0, 250.0, &mut ops);
+        assert_eq!(d, true_d as f32);
+        assert_eq!(
+            naive_masked_d_o(&lv, &rv, &runs, &lo, &ro, &m, 10.0, 250.0),
+            d
+        );
+    }
+
+    /// An object with box `b`, oriented-box height `h_o` and mask area `area`.
+    fn object_of(b: Roi, h_o: f32, area: u32) -> crate::object::Object {
+        crate::object::Object {
+            bbox: b,
+            obb: crate::object::OrientedBox {
+                half_h: h_o / 2.0,
+                ..Default::default()
+            },
+            area,
+            ..Default::default()
+        }
+    }
+
+    /// [`masked_d_o`] written plainly: the template as a set of pixels
+    /// within `max(4, h_o/4)` columns of a mask pixel on its row, each
+    /// candidate scored from scratch.
+    #[allow(clippy::too_many_arguments)]
+    fn naive_masked_d_o(
+        left: &ImageView<'_>,
+        right: &ImageView<'_>,
+        runs: &[crate::object::Run],
+        lo: &crate::object::Object,
+        ro: &crate::object::Object,
+        m: &BlockMatch,
+        d_lo: f32,
+        d_hi: f32,
+    ) -> f32 {
+        let w = left.width() as i64;
+        let margin = ((lo.obb.half_h * 0.5) as i64).max(4);
+        let mut px = std::collections::BTreeSet::new();
+        for r in runs.iter().filter(|r| r.x1 > r.x0) {
+            for x in (r.x0 as i64 - margin).max(0)..(r.x1 as i64 + margin).min(w) {
+                px.insert((r.y as usize, x));
+            }
+        }
+        let cands = d_o_candidates(&lo.bbox, &ro.bbox, &m.block_disparity);
+        let mut best = (f32::INFINITY, m.d_o);
+        for c in cands {
+            if c < d_lo || c > d_hi {
+                continue;
+            }
+            let d = c as i64;
+            let diffs: Vec<i32> = px
+                .iter()
+                .filter(|&&(_, x)| x - d >= 0 && x - d < w)
+                .map(|&(y, x)| {
+                    left.row(y)[x as usize] as i32 - right.row(y)[(x - d) as usize] as i32
+                })
+                .collect();
+            if diffs.is_empty() || 2 * diffs.len() < px.len().min(ro.area as usize) {
+                continue;
+            }
+            let n = diffs.len() as i128;
+            let sum: i128 = diffs.iter().map(|&v| v as i128).sum();
+            let acc: i128 = diffs.iter().map(|&v| (n * v as i128 - sum).abs()).sum();
+            let score = (acc as f64 / (n as f64 * n as f64)) as f32;
+            if score < best.0 {
+                best = (score, c);
+            }
+        }
+        best.1
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
+        #[test]
+        fn masked_d_o_equals_the_plain_version(
+            w in 8usize..90, h in 4usize..30, seed in proptest::prelude::any::<u64>(),
+            lx in 0u32..100, lw in 1u32..60, rx in 0u32..100, rw in 1u32..60,
+            ly in 0u32..30, lh in 1u32..30, h_o in 1.0f32..40.0, area in 1u32..2000,
+            d_lo in -40.0f32..20.0, span in 0.0f32..80.0,
+            spans in proptest::collection::vec((0u16..100, 0u16..40), 0..30),
+        ) {
+            let mut s = seed;
+            let mut next = || { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 };
+            let img: Vec<u8> = (0..w * h).map(|_| next()).collect();
+            let img2: Vec<u8> = (0..w * h).map(|_| next()).collect();
+            let (lv, rv) = (ImageView::packed(&img, w, h).unwrap(), ImageView::packed(&img2, w, h).unwrap());
+            let (lb, rb) = (Roi::new(lx, ly, lw, lh), Roi::new(rx, ly, rw, lh));
+            // one run per row (as segmentation writes them, sorted)
+            let runs: Vec<crate::object::Run> = spans
+                .iter()
+                .enumerate()
+                .map(|(k, &(x0, len))| crate::object::Run { y: (k % h) as u16, x0, x1: x0 + len })
+                .filter(|r| (r.y as usize) < h)
+                .take(h)
+                .collect();
+            let mut runs = runs;
+            runs.sort_by_key(|r| (r.y, r.x0));
+            runs.dedup_by_key(|r| r.y);
+            let (lo, ro) = (object_of(lb, h_o, area), object_of(rb, h_o, area));
+            let mut ops = 0u64;
+            if let Some(m) = match_boxes(&lv, &rv, lb, rb, d_lo, d_lo + span, CoarseCost::Deferred, &mut ops) {
+                let got = masked_d_o(&lv, &rv, &runs, &lo, &ro, &m, d_lo, d_lo + span, &mut ops);
+                let want = naive_masked_d_o(&lv, &rv, &runs, &lo, &ro, &m, d_lo, d_lo + span);
+                proptest::prop_assert_eq!(got, want);
+            }
         }
     }
 

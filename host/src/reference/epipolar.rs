@@ -17,7 +17,7 @@ const MAX_SCAN: i64 = 1024;
 
 /// The widened template of `obj`: pixels `(x, y)` within `m` columns of a
 /// mask pixel on the same row, inside `0..w`.
-fn template(obj: &RefObject, m: i64, w: i64) -> Vec<(i64, i64)> {
+pub(super) fn template(obj: &RefObject, m: i64, w: i64) -> Vec<(i64, i64)> {
     let mut rows: std::collections::BTreeMap<i64, Vec<i64>> = Default::default();
     for &(x, y) in &obj.pixels {
         rows.entry(y).or_default().push(x);
@@ -46,6 +46,19 @@ fn template(obj: &RefObject, m: i64, w: i64) -> Vec<(i64, i64)> {
 /// Zero-mean SAD per pixel of the template's pixels with `x % step.0 ==
 /// 0` and `y % step.1 == 0` against the right image `d` pixels to the left.
 fn cost(l: &Gray, r: &Gray, t: &[(i64, i64)], d: i64, step: (i64, i64)) -> Option<f64> {
+    cost_need(l, r, t, d, step, (MIN_COMPARED, usize::MAX))
+}
+
+/// [`cost`] accepting `d` when at least `need.0` of `min(template pixels,
+/// need.1)` pixels are compared (core: `epipolar::template_cost`).
+pub(super) fn cost_need(
+    l: &Gray,
+    r: &Gray,
+    t: &[(i64, i64)],
+    d: i64,
+    step: (i64, i64),
+    need: (f64, usize),
+) -> Option<f64> {
     let rows: Vec<&(i64, i64)> = t
         .iter()
         .filter(|p| p.0 % step.0 == 0 && p.1 % step.1 == 0)
@@ -54,7 +67,7 @@ fn cost(l: &Gray, r: &Gray, t: &[(i64, i64)], d: i64, step: (i64, i64)) -> Optio
         .iter()
         .filter_map(|&&(x, y)| Some(l.at(x, y)? - r.at(x - d, y)?))
         .collect();
-    if diffs.is_empty() || (diffs.len() as f64) < MIN_COMPARED * rows.len() as f64 {
+    if diffs.is_empty() || (diffs.len() as f64) < need.0 * rows.len().min(need.1) as f64 {
         return None;
     }
     let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;

@@ -187,6 +187,8 @@ pub struct Limits {
     pub max_sad: f64,
     /// d_o by the zero-mean whole-box SAD.
     pub zero_mean_d_o: bool,
+    /// d_o scored on the left object's widened mask (core: `masked_d_o`).
+    pub masked_d_o: bool,
     /// Epipolar search: best cost at most this share of the scan's median.
     pub search_max_ratio: f64,
     /// Epipolar search: best cost at most this share of the runner-up.
@@ -203,6 +205,7 @@ impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
             min_size_ratio: l.min_size_ratio as f64,
             max_sad: l.max_sad_per_pixel as f64,
             zero_mean_d_o: l.zero_mean_d_o,
+            masked_d_o: l.masked_d_o,
             search_max_ratio: l.search_max_ratio as f64,
             search_max_runner_up: l.search_max_runner_up as f64,
         }
@@ -315,6 +318,7 @@ fn blocks(b: (i64, i64, i64, i64)) -> Vec<(i64, i64)> {
 }
 
 /// Best match of a left box against a right box: (μ_SAD, d_o).
+#[allow(clippy::too_many_arguments)]
 fn match_boxes(
     l: &Gray,
     r: &Gray,
@@ -323,6 +327,7 @@ fn match_boxes(
     dlo: f64,
     dhi: f64,
     zero_mean: bool,
+    masked: Option<(&[(i64, i64)], usize)>,
 ) -> Option<(f64, f64)> {
     let y0 = lb.1.max(rb.1);
     let y1 = (lb.1 + lb.3).min(rb.1 + rb.3);
@@ -375,7 +380,15 @@ fn match_boxes(
         }
         // the core truncates toward zero when it turns a candidate into a shift
         let whole = if zero_mean { zsad } else { sad_need };
-        if let Some(s) = whole(l, r, lb.0, lb.0 + lb.2, y0, y1, c.trunc() as i64, need) {
+        let d = c.trunc() as i64;
+        let sc = match masked {
+            // on the left object's widened mask (core: `stereo::masked_d_o`)
+            Some((t, area)) if zero_mean => {
+                super::epipolar::cost_need(l, r, t, d, (1, 1), (0.5, area))
+            }
+            _ => whole(l, r, lb.0, lb.0 + lb.2, y0, y1, d, need),
+        };
+        if let Some(s) = sc {
             if s < best.0 {
                 best = (s, c);
             }
@@ -423,6 +436,10 @@ pub fn pair(
     // cand[i] = plausible (j, μ, d_o), cheapest first
     let mut cand: Vec<Vec<(usize, f64, f64)>> = vec![Vec::new(); left.len()];
     for (i, lo) in left.iter().enumerate() {
+        // the widened mask the d_o candidates are scored on
+        let tmpl = lim.masked_d_o.then(|| {
+            super::epipolar::template(lo, ((lo.h_o / 4.0).floor() as i64).max(4), l.w as i64)
+        });
         for (j, ro) in right.iter().enumerate() {
             let (lb, rb) = (lo.bbox, ro.bbox);
             if lb.2 == 0 || lb.3 == 0 || rb.2 == 0 || rb.3 == 0 {
@@ -434,7 +451,8 @@ pub fn pair(
             if ((lb.0 + lb.2 - rb.0) as f64) < dlo || ((lb.0 - rb.0 - rb.2) as f64) > dhi {
                 continue;
             }
-            if let Some((mu, d)) = match_boxes(l, r, lb, rb, dlo, dhi, lim.zero_mean_d_o) {
+            let masked = tmpl.as_deref().map(|t| (t, ro.pixels.len()));
+            if let Some((mu, d)) = match_boxes(l, r, lb, rb, dlo, dhi, lim.zero_mean_d_o, masked) {
                 if mu <= lim.max_sad {
                     cand[i].push((j, mu, d));
                 }
