@@ -77,6 +77,10 @@ pub const SCAN_BUDGET: u64 = 16_384;
 /// inside the right image for a disparity to count.
 const MIN_COMPARED: f32 = 0.9;
 
+/// The search's acceptance of a disparity: [`MIN_COMPARED`] of the
+/// template's pixels compared.
+const ALL: (f32, u64) = (MIN_COMPARED, u64::MAX);
+
 /// How a search for one left object came out (for diagnostics and tests).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -140,22 +144,9 @@ const fn multiples(x0: u32, x1: u32, step: u32) -> u64 {
 
 /// Zero-mean SAD per pixel of the template pixels on the lattice
 /// `(x, y) ≡ (0, 0) mod (step.0, step.1)` against the right image shifted
-/// by `−d`; `None` below [`MIN_COMPARED`] of those pixels compared. Adds
-/// the differences to `ops`.
-fn cost_at(
-    left: &ImageView<'_>,
-    right: &ImageView<'_>,
-    runs: &[Run],
-    m: u32,
-    d: i32,
-    step: (u32, u32),
-    ops: &mut u64,
-) -> Option<f32> {
-    template_cost(left, right, runs, m, d, step, (MIN_COMPARED, u64::MAX), ops)
-}
-
-/// [`cost_at`] accepting a disparity when at least `need.0` of
-/// `min(template pixels, need.1)` pixels are compared.
+/// by `−d`; `None` when fewer than `need.0` of `min(those pixels, need.1)`
+/// are compared (the search: [`MIN_COMPARED`] of all of them). Adds the
+/// differences to `ops`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn template_cost(
     left: &ImageView<'_>,
@@ -258,7 +249,7 @@ pub fn search_object(
     let mut n = 0usize;
     let mut d = lo;
     while d <= hi {
-        if let Some(c) = cost_at(left, right, runs, m, d, lattice, ops) {
+        if let Some(c) = template_cost(left, right, runs, m, d, lattice, ALL, ops) {
             if let Some(slot) = scan.get_mut(n) {
                 *slot = (d, c);
                 n += 1;
@@ -281,7 +272,7 @@ pub fn search_object(
     let mut fine: Option<(i32, f32)> = None;
     let reach = step as i32;
     for d in (coarse_d - reach).max(lo)..=(coarse_d + reach).min(hi) {
-        if let Some(c) = cost_at(left, right, runs, m, d, (1, 1), ops) {
+        if let Some(c) = template_cost(left, right, runs, m, d, (1, 1), ALL, ops) {
             if fine.is_none_or(|(_, b)| c < b) {
                 fine = Some((d, c));
             }

@@ -1295,38 +1295,8 @@ mod tests {
         );
         let lb = Roi::new(0, 10, 200, 20); // cut by the left border
         let rb = Roi::new(0, 10, 50, 20); // the fish's last 50 columns
-        for zero_mean in [false, true] {
-            let mut ops = 0u64;
-            let m = if zero_mean {
-                let mut m = match_boxes(
-                    &lv,
-                    &rv,
-                    lb,
-                    rb,
-                    10.0,
-                    250.0,
-                    CoarseCost::Deferred,
-                    &mut ops,
-                )
-                .unwrap();
-                m.d_o = zero_mean_d_o(&lv, &rv, lb, rb, &m, 10.0, 250.0, &mut ops);
-                m
-            } else {
-                match_boxes(&lv, &rv, lb, rb, 10.0, 250.0, CoarseCost::Plain, &mut ops).unwrap()
-            };
-            assert_eq!(m.d_o, true_d as f32, "zero-mean {zero_mean}: {m:?}");
-            // and the old rule (half of the left box) would have refused it
-            assert!(naive_zsad(&lv, &rv, lb.x, lb.right(), 10, 30, true_d, usize::MAX).is_none());
-        }
-        // scored on the masks as well: the left mask is the whole visible
-        // fish, the right one its last 50 columns
-        let runs: Vec<crate::object::Run> = (10..30)
-            .map(|y| crate::object::Run { y, x0: 0, x1: 200 })
-            .collect();
-        let lo = object_of(lb, 20.0, 200 * 20);
-        let ro = object_of(rb, 20.0, 50 * 20);
         let mut ops = 0u64;
-        let m = match_boxes(
+        let deferred = match_boxes(
             &lv,
             &rv,
             lb,
@@ -1337,12 +1307,23 @@ mod tests {
             &mut ops,
         )
         .unwrap();
-        let d = masked_d_o(&lv, &rv, &runs, &lo, &ro, &m, 10.0, 250.0, &mut ops);
+        let plain =
+            match_boxes(&lv, &rv, lb, rb, 10.0, 250.0, CoarseCost::Plain, &mut ops).unwrap();
+        let zero_mean = zero_mean_d_o(&lv, &rv, lb, rb, &deferred, 10.0, 250.0, &mut ops);
+        assert_eq!(plain.d_o, true_d as f32, "plain SAD: {plain:?}");
+        assert_eq!(zero_mean, true_d as f32, "zero-mean SAD");
+        // the old rule (half of the left box) would have refused it
+        assert!(naive_zsad(&lv, &rv, lb.x, lb.right(), 10, 30, true_d, usize::MAX).is_none());
+        // scored on the masks as well: the left mask is the whole visible
+        // fish, the right one its last 50 columns
+        let runs: Vec<crate::object::Run> = (10..30)
+            .map(|y| crate::object::Run { y, x0: 0, x1: 200 })
+            .collect();
+        let (lo, ro) = (object_of(lb, 20.0, 200 * 20), object_of(rb, 20.0, 50 * 20));
+        let d = masked_d_o(&lv, &rv, &runs, &lo, &ro, &deferred, 10.0, 250.0, &mut ops);
         assert_eq!(d, true_d as f32);
-        assert_eq!(
-            naive_masked_d_o(&lv, &rv, &runs, &lo, &ro, &m, 10.0, 250.0),
-            d
-        );
+        let plain_version = naive_masked_d_o(&lv, &rv, &runs, &lo, &ro, &deferred, 10.0, 250.0);
+        assert_eq!(plain_version, d);
     }
 
     /// An object with box `b`, oriented-box height `h_o` and mask area `area`.

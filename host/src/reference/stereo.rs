@@ -236,8 +236,41 @@ pub(crate) fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64
     sad_need(l, r, x0, x1, y0, y1, d, usize::MAX)
 }
 
-/// [`sad`] accepting the comparison when at least half of `min(box pixels,
-/// need)` pixels have a right counterpart (see [`zsad`]).
+/// The differences `a − b` of the left pixels `x0..x1` × `y0..y1` whose
+/// right counterpart `d` pixels to the left lies in the image; `None`
+/// when fewer than half of `min(box pixels, need)` are compared: `need`
+/// is the right box's pixels in the shared rows, all the right camera
+/// shows of an object the left image's left border cuts (core:
+/// `stereo::zsad_whole`).
+#[allow(clippy::too_many_arguments)]
+fn diffs(
+    l: &Gray,
+    r: &Gray,
+    x0: i64,
+    x1: i64,
+    y0: i64,
+    y1: i64,
+    d: i64,
+    need: usize,
+) -> Option<Vec<f64>> {
+    let x1 = x1.min(l.w as i64);
+    let y1 = y1.min(l.h as i64);
+    if x1 <= x0 || y1 <= y0 {
+        return None;
+    }
+    let mut out = Vec::new();
+    for y in y0..y1 {
+        for x in x0..x1 {
+            if let (Some(a), Some(b)) = (l.at(x, y), r.at(x - d, y)) {
+                out.push(a - b);
+            }
+        }
+    }
+    let total = (((x1 - x0) * (y1 - y0)) as usize).min(need);
+    (!out.is_empty() && 2 * out.len() >= total).then_some(out)
+}
+
+/// [`sad`] over the pixels [`diffs`] accepts.
 #[allow(clippy::too_many_arguments)]
 fn sad_need(
     l: &Gray,
@@ -249,35 +282,13 @@ fn sad_need(
     d: i64,
     need: usize,
 ) -> Option<f64> {
-    let x1 = x1.min(l.w as i64);
-    let y1 = y1.min(l.h as i64);
-    if x1 <= x0 || y1 <= y0 {
-        return None;
-    }
-    let (mut s, mut n) = (0.0, 0usize);
-    for y in y0..y1 {
-        for x in x0..x1 {
-            if let (Some(a), Some(b)) = (l.at(x, y), r.at(x - d, y)) {
-                s += (a - b).abs();
-                n += 1;
-            }
-        }
-    }
-    let total = (((x1 - x0) * (y1 - y0)) as usize).min(need);
-    if n == 0 || 2 * n < total {
-        None
-    } else {
-        Some(s / n as f64)
-    }
+    let v = diffs(l, r, x0, x1, y0, y1, d, need)?;
+    Some(v.iter().map(|x| x.abs()).sum::<f64>() / v.len() as f64)
 }
 
-/// Zero-mean SAD per pixel over the pixels [`sad`] compares: the mean
-/// difference of the two windows taken out (core: `stereo::zsad_per_pixel`).
-///
-/// The comparison is accepted when at least half of `min(box pixels,
-/// need)` pixels have a right counterpart: `need` is the right box's
-/// pixels in the shared rows, all the right camera shows of an object the
-/// left image's left border cuts (core: `stereo::zsad_whole`).
+/// Zero-mean SAD per pixel over the pixels [`diffs`] accepts: the mean
+/// difference of the two windows taken out (core:
+/// `stereo::zsad_per_pixel`).
 #[allow(clippy::too_many_arguments)]
 fn zsad(
     l: &Gray,
@@ -289,26 +300,10 @@ fn zsad(
     d: i64,
     need: usize,
 ) -> Option<f64> {
-    let x1 = x1.min(l.w as i64);
-    let y1 = y1.min(l.h as i64);
-    if x1 <= x0 || y1 <= y0 {
-        return None;
-    }
-    let mut diffs = Vec::new();
-    for y in y0..y1 {
-        for x in x0..x1 {
-            if let (Some(a), Some(b)) = (l.at(x, y), r.at(x - d, y)) {
-                diffs.push(a - b);
-            }
-        }
-    }
-    let total = (((x1 - x0) * (y1 - y0)) as usize).min(need);
-    if diffs.is_empty() || 2 * diffs.len() < total {
-        return None;
-    }
-    let n = diffs.len() as f64;
-    let mean = diffs.iter().sum::<f64>() / n;
-    Some(diffs.iter().map(|v| (v - mean).abs()).sum::<f64>() / n)
+    let v = diffs(l, r, x0, x1, y0, y1, d, need)?;
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    Some(v.iter().map(|x| (x - mean).abs()).sum::<f64>() / n)
 }
 
 fn blocks(b: (i64, i64, i64, i64)) -> Vec<(i64, i64)> {
