@@ -677,6 +677,8 @@ pub fn zero_mean_d_o(
 /// candidate is scored when at least half of `min(template pixels, right
 /// object's area)` pixels are compared (an object the left image's left
 /// border cuts shows the right camera only its part, see [`zsad_whole`]).
+/// [`pair_objects`] scores an object without mask runs (its runs did not
+/// fit the run pool) on its box instead ([`zero_mean_d_o`]).
 #[allow(clippy::too_many_arguments)]
 pub fn masked_d_o(
     left: &ImageView<'_>,
@@ -817,7 +819,10 @@ pub fn pair_objects<const N: usize, const R: usize>(
         m.map(|mut m| {
             if scan_cost == CoarseCost::Deferred {
                 let mut ops = 0u64;
-                m.d_o = if limits.masked_d_o {
+                // an object whose mask runs did not fit the run pool has
+                // only its box to be scored on
+                let has_mask = left.runs_of(lo).iter().any(|r| !r.is_empty());
+                m.d_o = if limits.masked_d_o && has_mask {
                     masked_d_o(
                         left_img,
                         right_img,

@@ -432,7 +432,8 @@ pub fn pair(
     let mut cand: Vec<Vec<(usize, f64, f64)>> = vec![Vec::new(); left.len()];
     for (i, lo) in left.iter().enumerate() {
         // the widened mask the d_o candidates are scored on
-        let tmpl = lim.masked_d_o.then(|| {
+        // (an object without mask pixels is scored on its box)
+        let tmpl = (lim.masked_d_o && !lo.pixels.is_empty()).then(|| {
             super::epipolar::template(lo, ((lo.h_o / 4.0).floor() as i64).max(4), l.w as i64)
         });
         for (j, ro) in right.iter().enumerate() {
