@@ -233,7 +233,7 @@ pub struct RefPair {
 /// against the right image `d` pixels to the left; `None` when fewer than
 /// half of the pixels have a right counterpart.
 pub(crate) fn sad(l: &Gray, r: &Gray, x0: i64, x1: i64, y0: i64, y1: i64, d: i64) -> Option<f64> {
-    sad_need(l, r, x0, x1, y0, y1, d, usize::MAX)
+    box_sad(l, r, x0, x1, y0, y1, d, usize::MAX, false)
 }
 
 /// The differences `a − b` of the left pixels `x0..x1` × `y0..y1` whose
@@ -270,27 +270,11 @@ fn diffs(
     (!out.is_empty() && 2 * out.len() >= total).then_some(out)
 }
 
-/// [`sad`] over the pixels [`diffs`] accepts.
-#[allow(clippy::too_many_arguments)]
-fn sad_need(
-    l: &Gray,
-    r: &Gray,
-    x0: i64,
-    x1: i64,
-    y0: i64,
-    y1: i64,
-    d: i64,
-    need: usize,
-) -> Option<f64> {
-    let v = diffs(l, r, x0, x1, y0, y1, d, need)?;
-    Some(v.iter().map(|x| x.abs()).sum::<f64>() / v.len() as f64)
-}
-
-/// Zero-mean SAD per pixel over the pixels [`diffs`] accepts: the mean
-/// difference of the two windows taken out (core:
+/// SAD per pixel over the pixels [`diffs`] accepts; with `zero_mean`
+/// the mean difference of the two windows is taken out first (core:
 /// `stereo::zsad_per_pixel`).
 #[allow(clippy::too_many_arguments)]
-fn zsad(
+fn box_sad(
     l: &Gray,
     r: &Gray,
     x0: i64,
@@ -299,10 +283,15 @@ fn zsad(
     y1: i64,
     d: i64,
     need: usize,
+    zero_mean: bool,
 ) -> Option<f64> {
     let v = diffs(l, r, x0, x1, y0, y1, d, need)?;
     let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
+    let mean = if zero_mean {
+        v.iter().sum::<f64>() / n
+    } else {
+        0.0
+    };
     Some(v.iter().map(|x| (x - mean).abs()).sum::<f64>() / n)
 }
 
@@ -365,7 +354,7 @@ fn match_boxes(
     cands.push((lb.0 - rb.0) as f64);
     cands.push((lb.0 + lb.2 - rb.0 - rb.2) as f64);
     // the right box's pixels in the shared rows: what the right camera
-    // shows of an object (all of it the left border leaves, see `zsad`)
+    // shows of an object (all of it the left border leaves, see `diffs`)
     let rows = (y1.min(l.h as i64).min(r.h as i64) - y0).max(0);
     let need = (((rb.0 + rb.2).min(r.w as i64) - rb.0).max(0) * rows) as usize;
     let mut best = (f64::INFINITY, dmean);
@@ -374,14 +363,13 @@ fn match_boxes(
             continue;
         }
         // the core truncates toward zero when it turns a candidate into a shift
-        let whole = if zero_mean { zsad } else { sad_need };
         let d = c.trunc() as i64;
         let sc = match masked {
             // on the left object's widened mask (core: `stereo::masked_d_o`)
             Some((t, area)) if zero_mean => {
                 super::epipolar::cost_need(l, r, t, d, (1, 1), (0.5, area))
             }
-            _ => whole(l, r, lb.0, lb.0 + lb.2, y0, y1, d, need),
+            _ => box_sad(l, r, lb.0, lb.0 + lb.2, y0, y1, d, need, zero_mean),
         };
         if let Some(s) = sc {
             if s < best.0 {
