@@ -761,6 +761,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                     })
                 })
             };
+            let mut emitted: Vec<&Vec<(u32, u32)>> = Vec::new();
             for comp in comps_all.iter() {
                 // elongation test (core: `local::elongated_enough`)
                 let e = p.min_elongation as f64;
@@ -813,13 +814,16 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                     level: level as u8,
                 };
                 add_dedup(&mut res.objects, obj);
+                emitted.push(comp);
             }
-            if comps_all.is_empty() {
+            if emitted.is_empty() {
                 break; // nothing to clear: level 1 would be level 0 again
             }
             if level + 1 < levels {
+                // only the objects found are cleared: a component the tests
+                // refused is no bright fish to set aside
                 let mut grown = GrayImage::new(rw, rh);
-                for &(x, y) in comps_all.iter().flatten() {
+                for &(x, y) in emitted.iter().copied().flatten() {
                     grown.put_pixel(x, y, Luma([255]));
                 }
                 let grown = dilate(&grown, Norm::LInf, p.disk_size);
