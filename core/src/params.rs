@@ -91,9 +91,10 @@ pub struct Params {
     pub local_smooth: u8,
     /// Whether the local regions are thresholded on the frame minus its
     /// smooth background (strobe glow, vignetting; beyond the paper,
-    /// `crate::background`). Applied to regions whose coarse object is
-    /// thinner than the background's opening square (the opening removed
-    /// them from the background). Default on.
+    /// `crate::background`), in every region. Default on. (Until session
+    /// 26 only regions whose coarse object was thinner than the opening
+    /// square; measured on seeds 1–30, every region: segmentation recall
+    /// 0.748 → 0.759, tracking success 582 → 591 of 899.)
     pub background: bool,
     /// Half-side `r` of the background's opening square, in 16-pixel
     /// cells: the square is `(2r + 1) · 16` pixels wide (176 px at the

@@ -86,7 +86,7 @@ use super::workspace::{RoiBufs, STAT_WORDS};
 use super::{
     emit, Candidate, Components, MaskRef, Region, RegionTrace, SegmentError, SegmentStats,
 };
-use crate::background::{BgGrid, BLOCK};
+use crate::background::BgGrid;
 use crate::hist::{
     add_masked_pair_256, add_row_256, bin_of, fold_bins_range, median_mad, percentile_256,
     ratio_backprojection_lut_range, sum_sumsq,
@@ -433,20 +433,18 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     if labels.len() < n {
         return Err(SegmentError::WorkspaceTooSmall);
     }
-    // the frame minus its smooth background (beyond the paper), for
-    // regions whose coarse object the background's opening removed
+    // the frame minus its smooth background (beyond the paper), in every
+    // region (`Params::background`: until session 26 only in regions whose
+    // coarse object was thinner than the opening square)
     if let Some(g) = bg {
-        let side = ((2 * params.background_radius as usize + 1) * BLOCK) as f32;
-        if libm::sqrtf(3.0) * reg.b / params.ellipse_scale.max(1.0) < side {
-            // the thresholds read only the ellipse's pixels of `d`; the
-            // split of merged objects reads every object pixel, and closing
-            // can add a few outside the ellipse, so then whole rows
-            for (j, (row, sp)) in d.chunks_exact_mut(rw).zip(spans.iter()).enumerate() {
-                let r = if params.split_merged { 0..rw } else { span(sp) };
-                let x0 = roi.x as usize + r.start;
-                if let Some(part) = row.get_mut(r) {
-                    g.subtract_row(roi.y as usize + j, x0, part);
-                }
+        // the thresholds read only the ellipse's pixels of `d`; the split
+        // of merged objects reads every object pixel, and closing can add
+        // a few outside the ellipse, so then whole rows
+        for (j, (row, sp)) in d.chunks_exact_mut(rw).zip(spans.iter()).enumerate() {
+            let r = if params.split_merged { 0..rw } else { span(sp) };
+            let x0 = roi.x as usize + r.start;
+            if let Some(part) = row.get_mut(r) {
+                g.subtract_row(roi.y as usize + j, x0, part);
             }
         }
     }

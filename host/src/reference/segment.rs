@@ -484,7 +484,6 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
     let bg = p
         .background
         .then(|| Background::estimate(&filtered, p.background_radius as usize));
-    let side = ((2 * p.background_radius as u32 + 1) * super::background::BLOCK) as f64;
     for &[cx, cy, ca, cb, cc] in &coarse {
         let (angle, l1, l2) = pca_of(ca, cb, cc);
         let s = p.ellipse_scale as f64;
@@ -524,8 +523,8 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
             .map(|i| inside(x0 + i % rw, y0 + i / rw))
             .collect();
         // the pixels the thresholds see (core: `local_smooth`, then the
-        // background subtracted for regions thinner than its opening square)
-        let sub = bg.as_ref().filter(|_| 3f64.sqrt() * b / s < side);
+        // background subtracted)
+        let sub = bg.as_ref();
         // level 1 (core: `Params::dim_level`): the region again, its pixels
         // within the disk's side (Chebyshev) of level 0's objects set to 0
         // and out of its histogram
