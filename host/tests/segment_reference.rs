@@ -123,11 +123,8 @@ fn ablations_agree_too() {
 }
 
 /// Two shaded fish lying flank to flank (bright backs, dim edges) on noisy
-/// water: one object without the split, two with it
-/// (`Params::split_merged`), each on its fish, and core and reference
-/// agree either way.
-#[test]
-fn touching_fish_split_agrees_with_reference() {
+/// water, 512 × 512, and the fish as (cx, cy, a, b, peak above the water).
+fn touching_fish() -> (GrayImage, [(f32, f32, f32, f32, f32); 2]) {
     let (w, h) = (512u32, 512u32);
     let mut s = 7u64;
     let mut noise = || {
@@ -152,7 +149,23 @@ fn touching_fish_split_agrees_with_reference() {
         }
         image::Luma([(v + noise()).clamp(0.0, 255.0) as u8])
     });
-    let base = Params::for_frame(512);
+    (img, fish)
+}
+
+/// The two touching fish on raw pixels (no background): one object
+/// without the split, two with it
+/// (`Params::split_merged`), each on its fish, and core and reference
+/// agree either way.
+#[test]
+fn touching_fish_split_agrees_with_reference() {
+    let (img, fish) = touching_fish();
+    // on raw pixels: since session 26 every region, this thick merged one
+    // too, takes the background, which here already parts the two fish
+    // (`the_background_parts_two_touching_fish` below)
+    let base = Params {
+        background: false,
+        ..Params::for_frame(512)
+    };
     let (off, r_off) = compare_segmentation(&img, &base).unwrap();
     assert!(off.passes(), "{off:?}");
     assert_eq!(
@@ -179,6 +192,35 @@ fn touching_fish_split_agrees_with_reference() {
             r_on.objects.iter().map(|o| o.obb).collect::<Vec<_>>()
         );
     }
+}
+
+/// The touching fish with the default parameters: the background,
+/// subtracted in every region since session 26 (their merged region is
+/// thicker than the opening square, which once meant raw pixels), parts
+/// them into two objects, one on each fish; core and reference agree.
+#[test]
+fn the_background_parts_two_touching_fish() {
+    let (img, fish) = touching_fish();
+    let (agr, r) = compare_segmentation(&img, &Params::for_frame(512)).unwrap();
+    assert!(agr.passes(), "{agr:?}");
+    assert_eq!(r.objects.len(), 2);
+    for &(cx, cy, a, ..) in &fish {
+        let hit = r.objects.iter().any(|o| {
+            let (ox, oy, ..) = o.obb;
+            ((ox - cx as f64).powi(2) + (oy - cy as f64).powi(2)).sqrt() < 0.15 * a as f64
+        });
+        assert!(
+            hit,
+            "fish at ({cx}, {cy}) not found: {:?}",
+            r.objects.iter().map(|o| o.obb).collect::<Vec<_>>()
+        );
+    }
+    // the old rule (raw pixels for this region) merges them
+    let raw = Params {
+        background: false,
+        ..Params::for_frame(512)
+    };
+    assert_eq!(compare_segmentation(&img, &raw).unwrap().1.objects.len(), 1);
 }
 
 mod random {
