@@ -122,9 +122,12 @@ fn ablations_agree_too() {
     }
 }
 
+/// A drawn fish: (cx, cy, a, b, peak above the water).
+type DrawnFish = (f32, f32, f32, f32, f32);
+
 /// Two shaded fish lying flank to flank (bright backs, dim edges) on noisy
-/// water, 512 × 512, and the fish as (cx, cy, a, b, peak above the water).
-fn touching_fish() -> (GrayImage, [(f32, f32, f32, f32, f32); 2]) {
+/// water, 512 × 512, and the fish.
+fn touching_fish() -> (GrayImage, [DrawnFish; 2]) {
     let (w, h) = (512u32, 512u32);
     let mut s = 7u64;
     let mut noise = || {
