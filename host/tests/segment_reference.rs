@@ -6,6 +6,7 @@
 mod support;
 
 use fishtrack::reference::compare::compare_segmentation;
+use fishtrack::reference::segment::RefObject;
 use fishtrack_core::Params;
 use image::GrayImage;
 use support::*;
@@ -155,6 +156,22 @@ fn touching_fish() -> (GrayImage, [DrawnFish; 2]) {
     (img, fish)
 }
 
+/// Each drawn fish has an object whose oriented-box centre lies within
+/// 0.15 of the fish's semi-major axis of the fish's centre.
+fn assert_one_object_on_each(objects: &[RefObject], fish: &[DrawnFish]) {
+    for &(cx, cy, a, ..) in fish {
+        let hit = objects.iter().any(|o| {
+            let (ox, oy, ..) = o.obb;
+            ((ox - cx as f64).powi(2) + (oy - cy as f64).powi(2)).sqrt() < 0.15 * a as f64
+        });
+        assert!(
+            hit,
+            "fish at ({cx}, {cy}) not found: {:?}",
+            objects.iter().map(|o| o.obb).collect::<Vec<_>>()
+        );
+    }
+}
+
 /// The two touching fish on raw pixels (no background): one object
 /// without the split, two with it
 /// (`Params::split_merged`), each on its fish, and core and reference
@@ -184,17 +201,7 @@ fn touching_fish_split_agrees_with_reference() {
     assert!(on.passes(), "{on:?}");
     assert!(on.core_stats.split >= 1, "{:?}", on.core_stats);
     assert_eq!(r_on.objects.len(), 2);
-    for &(cx, cy, a, ..) in &fish {
-        let hit = r_on.objects.iter().any(|o| {
-            let (ox, oy, ..) = o.obb;
-            ((ox - cx as f64).powi(2) + (oy - cy as f64).powi(2)).sqrt() < 0.15 * a as f64
-        });
-        assert!(
-            hit,
-            "fish at ({cx}, {cy}) not found: {:?}",
-            r_on.objects.iter().map(|o| o.obb).collect::<Vec<_>>()
-        );
-    }
+    assert_one_object_on_each(&r_on.objects, &fish);
 }
 
 /// The touching fish with the default parameters: the background,
@@ -207,17 +214,7 @@ fn the_background_parts_two_touching_fish() {
     let (agr, r) = compare_segmentation(&img, &Params::for_frame(512)).unwrap();
     assert!(agr.passes(), "{agr:?}");
     assert_eq!(r.objects.len(), 2);
-    for &(cx, cy, a, ..) in &fish {
-        let hit = r.objects.iter().any(|o| {
-            let (ox, oy, ..) = o.obb;
-            ((ox - cx as f64).powi(2) + (oy - cy as f64).powi(2)).sqrt() < 0.15 * a as f64
-        });
-        assert!(
-            hit,
-            "fish at ({cx}, {cy}) not found: {:?}",
-            r.objects.iter().map(|o| o.obb).collect::<Vec<_>>()
-        );
-    }
+    assert_one_object_on_each(&r.objects, &fish);
     // the old rule (raw pixels for this region) merges them
     let raw = Params {
         background: false,

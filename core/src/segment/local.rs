@@ -818,7 +818,6 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         }
         // the components emitted as objects: level 1 clears these only
         let mut emitted = [false; super::MAX_ROI_COMPONENTS];
-        let mut n_emitted = 0usize;
         for k in 0..n2s {
             let Some(rec) = recs.get(k) else { break };
             let mut hist = [0u32; HIST_BINS];
@@ -862,10 +861,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
             emit(out, &cand, &mask, stats);
             if let Some(e) = emitted.get_mut(k) {
                 *e = true;
-                n_emitted += 1;
             }
         }
-        if n_emitted == 0 {
+        if !emitted.contains(&true) {
             // nothing to clear: level 1 would split the region as level 0 did
             break;
         }
