@@ -467,9 +467,9 @@ impl BenchReport {
 pub fn run(dir: &Path, json: bool, opts: &BenchOptions) -> Result<()> {
     let r = bench(dir, opts)?;
     if json {
-        println!("{}", r.json());
+        crate::outln!("{}", r.json())?;
     } else {
-        print!("{}", r.table());
+        crate::out!("{}", r.table())?;
     }
     Ok(())
 }

@@ -279,52 +279,54 @@ pub fn run(dir: &Path) -> Result<()> {
             .collect();
     let ta = rt::compare(&core_asg, &ref_asg);
 
-    println!(
+    crate::outln!(
         "fishtrack compare: {} ({} frame pairs), core vs float reference",
         setup.haul.dir.display(),
         setup.haul.frames.len()
-    );
-    println!(
+    )?;
+    crate::outln!(
         "{:<52} {:>12} {:>10}  result",
-        "criterion", "frames ok", "worst"
-    );
-    let line = |name: &str, t: &Tally, worst: String| {
-        println!(
+        "criterion",
+        "frames ok",
+        "worst"
+    )?;
+    let line = |name: &str, t: &Tally, worst: String| -> Result<()> {
+        crate::outln!(
             "{:<52} {:>12} {:>10}  {}",
             name,
             format!("{}/{}", t.pass, t.frames),
             worst,
             if t.ok() { "agree" } else { "DISAGREE" }
-        );
+        )
     };
     line(
         "segmentation (τ ±1, same objects, IoU ≥ 0.99)",
         &seg,
         format!("{:.4}", 1.0 - seg.worst),
-    );
-    line("stereo pairs identical", &pairs, "-".into());
+    )?;
+    line("stereo pairs identical", &pairs, "-".into())?;
     line(
         "coarse disparities d_o within 1 px",
         &disparities,
         format!("{worst_d:.1} px", worst_d = disparities.worst),
-    );
+    )?;
     line(
         "stereo lengths within 0.5 %",
         &lengths,
         format!("{:.3} %", 100.0 * lengths.worst),
-    );
+    )?;
     line(
         "withheld stereo lengths within 0.5 %",
         &raw_lengths,
         format!("{:.3} %", 100.0 * raw_lengths.worst),
-    );
-    println!(
+    )?;
+    crate::outln!(
         "{:<52} {:>12} {:>10}  {}",
         "track assignments identical",
         format!("{}/{}", ta.same, ta.same + ta.differing),
         ta.differing,
         if ta.identical() { "agree" } else { "DISAGREE" }
-    );
+    )?;
     let mut failed = Vec::new();
     for (name, t) in [
         ("segmentation", &seg),
@@ -334,19 +336,20 @@ pub fn run(dir: &Path) -> Result<()> {
         ("withheld stereo lengths", &raw_lengths),
     ] {
         if let Some(f) = &t.first_fail {
-            println!("first {name} disagreement: {f}");
+            crate::outln!("first {name} disagreement: {f}")?;
             failed.push(name);
         }
     }
     if !ta.identical() {
-        println!(
+        crate::outln!(
             "track assignments only in the core: {:?}; only in the reference: {:?}",
-            ta.only_a, ta.only_b
-        );
+            ta.only_a,
+            ta.only_b
+        )?;
         failed.push("track assignments");
     }
     if failed.is_empty() {
-        println!("core and reference agree");
+        crate::outln!("core and reference agree")?;
         Ok(())
     } else {
         anyhow::bail!("core and reference disagree: {}", failed.join(", "))

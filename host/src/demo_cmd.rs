@@ -35,39 +35,39 @@ pub fn run(out: Option<PathBuf>) -> Result<()> {
         fish_rate: 1.0,
     };
     let truth = write_haul(&haul, &cfg)?;
-    println!(
+    crate::outln!(
         "synthesised {} frame pairs ({}x{}) with {} fish in {}",
         truth.frames,
         truth.width,
         truth.height,
         truth.fish.len(),
         haul.display()
-    );
+    )?;
     let o = track_haul(&haul, &res, &TrackOptions::default())?;
-    println!(
+    crate::outln!(
         "tracked: {} fish ({} with a length), {:.2} s per frame pair → {}",
         o.fish,
         o.measured,
         o.seconds_per_frame,
         res.display()
-    );
+    )?;
     let report = crate::eval::evaluate(&haul, &res)?;
-    print!("{}", report.table());
+    crate::out!("{}", report.table())?;
     if let Some(t) = &report.tracking {
-        println!(
+        crate::outln!(
             "summary: {} fish counted, {} true (count error {:+.1} %)",
             t.count.tracks,
             t.count.fish,
             100.0 * t.count.error
-        );
+        )?;
         match &t.length {
-            Some(l) => println!(
+            Some(l) => crate::outln!(
                 "summary: per-fish length MAPE {:.2} % over {}/{} fish measured",
                 100.0 * l.mape,
                 l.measured,
                 l.measurable
-            ),
-            None => println!("summary: no fish length to score"),
+            )?,
+            None => crate::outln!("summary: no fish length to score")?,
         }
     }
     Ok(())

@@ -26,6 +26,7 @@ pub mod reference;
 /// The stereo float reference under its former path.
 pub use reference::stereo as reference_stereo;
 pub mod stats;
+pub mod stdout;
 pub mod survey;
 pub mod synth;
 pub mod timing;

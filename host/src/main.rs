@@ -137,7 +137,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 fish_rate,
             };
             let truth = fishtrack::synth::write_haul(&dir, &config)?;
-            println!(
+            fishtrack::outln!(
                 "wrote {} frame pairs ({}x{}, seed {}) with {} fish to {}",
                 truth.frames,
                 truth.width,
@@ -145,7 +145,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 truth.seed,
                 truth.fish.len(),
                 dir.display()
-            );
+            )?;
             Ok(())
         }
         Command::Track {
@@ -168,9 +168,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval { haul, out, json } => {
             let report = fishtrack::eval::evaluate(&haul, &out)?;
             if json {
-                println!("{}", report.json());
+                fishtrack::outln!("{}", report.json())?;
             } else {
-                print!("{}", report.table());
+                fishtrack::out!("{}", report.table())?;
             }
             Ok(())
         }

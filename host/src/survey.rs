@@ -165,8 +165,8 @@ pub fn write_survey(path: &Path, rows: &[SurveyRow]) -> Result<()> {
     })
 }
 
-fn report(h: &Path, dest: &Path, o: &HaulOutcome) {
-    println!(
+fn report(h: &Path, dest: &Path, o: &HaulOutcome) -> Result<()> {
+    crate::outln!(
         "{}: {} frames, {} fish ({} measured), {:.2} s/frame → {}",
         h.display(),
         o.frames,
@@ -174,15 +174,14 @@ fn report(h: &Path, dest: &Path, o: &HaulOutcome) {
         o.lengths.len(),
         o.seconds_per_frame,
         dest.display()
-    );
+    )
 }
 
 /// `fishtrack track HAUL... --out DIR` (see the module documentation).
 pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
     if let [one] = hauls {
         let o = track_haul(one, out, opts)?;
-        report(one, out, &o);
-        return Ok(());
+        return report(one, out, &o);
     }
     let names: Vec<String> = hauls.iter().map(|h| haul_name(h)).collect();
     for (i, n) in names.iter().enumerate() {
@@ -217,10 +216,14 @@ pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
     });
     let mut rows = Vec::new();
     let mut first_err = None;
+    // an error printing must not stop the survey's files
+    let mut print_err = None;
     for ((h, n), r) in hauls.iter().zip(&names).zip(results) {
         match r {
             Ok(o) => {
-                report(h, &out.join(n), &o);
+                if let Err(e) = report(h, &out.join(n), &o) {
+                    print_err.get_or_insert(e);
+                }
                 rows.push(SurveyRow::new(n.clone(), &o));
             }
             Err(e) => {
@@ -238,13 +241,15 @@ pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
         )));
     }
     write_survey(&out.join("survey.csv"), &rows)?;
-    println!(
+    if let Some(e) = print_err {
+        return Err(e);
+    }
+    crate::outln!(
         "survey: {} hauls, {} fish → {}",
         rows.len(),
         rows.iter().map(|r| r.fish_count).sum::<usize>(),
         out.join("survey.csv").display()
-    );
-    Ok(())
+    )
 }
 
 /// Creates the survey folder `out` and removes a stale `survey.csv` (it is

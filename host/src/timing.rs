@@ -561,29 +561,29 @@ pub fn run(port: &Path, frames: u32) -> anyhow::Result<()> {
     }
     let tol = Tolerances::default();
     let lines = analyse(&config, frames, &edges, c.stats(), &tol);
-    println!(
+    crate::outln!(
         "fishtrack timing-check: {} (protocol {}), {frames} frames at {} fps",
         c.name,
         link::PROTOCOL_VERSION,
         config.fps
-    );
-    println!(
+    )?;
+    crate::outln!(
         "timing: exposure {} us, strobe lead {} us, strobe width {} us, trigger width {} us, period {} us",
         config.exposure_us, config.strobe_lead_us, config.strobe_width_us, config.trigger_width_us,
         config.period_us()
-    );
-    println!();
-    print!("{}", render(&lines));
+    )?;
+    crate::outln!()?;
+    crate::out!("{}", render(&lines))?;
     let failed: Vec<&CheckLine> = lines.iter().filter(|l| !l.pass).collect();
     if failed.is_empty() {
-        println!("\nRESULT: PASS");
+        crate::outln!("\nRESULT: PASS")?;
         Ok(())
     } else {
-        println!(
+        crate::outln!(
             "\nRESULT: FAIL ({} of {} checks)",
             failed.len(),
             lines.len()
-        );
+        )?;
         let mut msg = String::from("timing check failed:");
         for l in failed {
             let _ = write!(

@@ -546,6 +546,46 @@ fn cli_eval_prints_table_and_json_and_rejects_bad_input() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("appears twice in frame 1"));
 }
 
+/// `fishtrack eval --json | head -1`: the reader closes the pipe before the
+/// report is written. The program must neither panic ("failed printing to
+/// stdout") nor fail; a bad output directory still fails with its error.
+#[test]
+fn cli_eval_into_a_closed_pipe_ends_quietly() {
+    use std::process::{Command, Stdio};
+    let t = truth();
+    let haul = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    write(
+        &haul.path().join("truth.json"),
+        &serde_json::to_string(&t).unwrap(),
+    );
+    perfect_output(out.path(), &t);
+    let bin = env!("CARGO_BIN_EXE_fishtrack");
+    let run = |out_dir: &std::path::Path| {
+        let mut child = Command::new(bin)
+            .arg("eval")
+            .arg("--json")
+            .arg(haul.path())
+            .arg(out_dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // close the reading end before the program writes anything
+        drop(child.stdout.take());
+        child.wait_with_output().unwrap()
+    };
+    let o = run(out.path());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{:?}: {err}", o.status);
+    assert!(!err.contains("panicked"), "{err}");
+    // the closed pipe does not hide an input error
+    let empty = tempfile::tempdir().unwrap();
+    let o = run(empty.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("tracks.csv"));
+}
+
 /// Eq. (16) among the detected fish: a fish the detections never found
 /// leaves the population of `success_detected` but not that of `success`;
 /// one found in under half of its countable frames leaves it too; a split
