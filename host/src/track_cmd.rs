@@ -253,8 +253,10 @@ impl Setup {
         // the tracker's frame border is the raw view's (TrackConfig::view)
         cfg.track.view = self.rectifier.view_rois();
         cfg.track.outline = self.rectifier.view_outlines();
-        // the cues' σ follow the raw views' scale, not a canvas's size
+        // the cues' σ and a newborn's default velocity follow the raw
+        // views' scale, not a canvas's size
         cfg.track.sigma_defaults = fishtrack_core::track::Sigmas::for_frame(self.raw_width);
+        cfg.track.crossing_width = self.raw_width;
         cfg
     }
 

@@ -219,6 +219,13 @@ pub struct TrackConfig {
     pub z_ref_mm: f32,
     /// Default σ² until enough samples (see [`sigma`]).
     pub sigma_defaults: Sigmas,
+    /// Width, pixels, that a fish crosses in the paper's 4.3-frame
+    /// lifespan: the scale of a newborn's default velocity
+    /// ([`default_v_init`]) until the data give one. Default: the frame
+    /// width. The host sets the raw view's width (as for
+    /// `sigma_defaults`): a canvas that keeps every raw pixel is 15–25 %
+    /// wider than the view the fish cross.
+    pub crossing_width: u32,
     /// Samples a cue needs before its σ² is estimated. Default 32.
     pub min_sigma_samples: u16,
     /// Cap on each cue's term z of the matching cost (robust eq. 9, see
@@ -306,6 +313,7 @@ impl TrackConfig {
             birth_area_factor: 2.0,
             z_ref_mm: 2000.0,
             sigma_defaults: Sigmas::for_frame(width),
+            crossing_width: width,
             min_sigma_samples: 32,
             cue_cap: f32::INFINITY,
             swap_passes: 4,
@@ -322,6 +330,9 @@ impl TrackConfig {
         let pos = |v: f32| v.is_finite() && v > 0.0;
         if self.width == 0 || self.height == 0 || self.width > 32_000 || self.height > 32_000 {
             return Err(TrackError::Config("width/height: 1 to 32000"));
+        }
+        if self.crossing_width == 0 || self.crossing_width > 32_000 {
+            return Err(TrackError::Config("crossing_width: 1 to 32000"));
         }
         if self
             .view
@@ -799,7 +810,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
             cues: self.cfg.cues,
             v_init: self
                 .sigma
-                .v_init_or(min, default_v_init(params, self.cfg.width)),
+                .v_init_or(min, default_v_init(params, self.cfg.crossing_width)),
             z_ref: self.cfg.z_ref_mm,
             cut_aware: self.cfg.cut_aware_motion,
             robust: Robust {

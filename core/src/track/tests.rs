@@ -615,6 +615,50 @@ fn a_box_that_misses_its_centroid_counts_as_uncut() {
 }
 
 #[test]
+fn a_newborn_is_projected_across_the_crossing_width_not_the_frame() {
+    // On a frame twice as wide as the view the fish cross (a canvas that
+    // keeps every raw pixel), a newborn's default velocity is the view's
+    // width over the 4.3-frame lifespan. A fish at that projection and a
+    // decoy at the frame width's projection (listed first): with
+    // `crossing_width` the view's width the fish wins; left at the frame
+    // width, the decoy does.
+    let p = Params::for_frame(W);
+    let (v, v2) = (default_v_init(&p, W), default_v_init(&p, 2 * W));
+    let frames = std::vec![
+        std::vec![fish(1900.0, 1000.0, 200.0, 9, 1800.0, 0)],
+        std::vec![
+            fish(1900.0 + v2[0], 1000.0 + v2[1], 200.0, 9, 1800.0, 0),
+            fish(1900.0 + v[0], 1000.0 + v[1], 200.0, 9, 1800.0, 1),
+        ],
+    ];
+    let tight = Sigmas {
+        v0: 30.0 * 30.0,
+        ..Sigmas::for_frame(W)
+    };
+    let cfg = |crossing| TrackConfig {
+        sigma_defaults: tight,
+        crossing_width: crossing,
+        ..TrackConfig::for_frame(2 * W, W)
+    };
+    for (crossing, want) in [(W, 1u16), (2 * W, 0)] {
+        let log = run_cfg(&frames, cfg(crossing));
+        let id = log.ids_of(0, 0);
+        assert_eq!(id.len(), 1, "{:?}", log.frames);
+        assert_eq!(
+            log.ids_of(1, want),
+            id,
+            "crossing {crossing}: {:?}",
+            log.frames
+        );
+    }
+    let bad = TrackConfig {
+        crossing_width: 0,
+        ..TrackConfig::for_frame(W, W)
+    };
+    assert!(bad.validate(16).is_err());
+}
+
+#[test]
 fn a_fish_leaving_cut_by_the_border_is_not_a_new_fish() {
     // A 400-px fish swims out through the left border at 500 px/frame: its
     // prediction for frame 3 (x = 60) is inside the exit margin, so its

@@ -635,7 +635,7 @@ pub fn run_traced(
             _ => {
                 let (x, y) = (p.v_ref_x as f64, p.v_ref_y as f64);
                 let n = (x * x + y * y).sqrt();
-                let s = cfg.width as f64 / 4.3 / n;
+                let s = cfg.crossing_width as f64 / 4.3 / n;
                 [x * s, y * s]
             }
         };
