@@ -50,10 +50,15 @@ impl Tally {
     }
 }
 
-/// Runs the comparison on `dir` and prints the table; errors when any
-/// criterion fails.
-pub fn run(dir: &Path) -> Result<()> {
-    let setup = prepare(dir, &TrackOptions::default())?;
+/// Runs the comparison on `dir`, rectified with `rect_alpha` (as `fishtrack
+/// track --rect-alpha`; the default scaling when `None`), and prints the
+/// table; errors when any criterion fails.
+pub fn run(dir: &Path, rect_alpha: Option<crate::rectify::Scaling>) -> Result<()> {
+    let opts = TrackOptions {
+        rect_alpha,
+        ..TrackOptions::default()
+    };
+    let setup = prepare(dir, &opts)?;
     let mut pipe = new_pipeline(&setup)?;
     let cfg = setup.pipeline_config();
     let mut ws =

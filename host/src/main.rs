@@ -89,6 +89,9 @@ enum Command {
     Compare {
         /// Haul directory.
         haul: PathBuf,
+        /// Rectification free scaling, as for `track` (default 0.25).
+        #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
+        rect_alpha: Option<fishtrack::rectify::Scaling>,
     },
     /// Per-stage timing, pairs per second and memory on a haul.
     Bench {
@@ -174,7 +177,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Compare { haul } => fishtrack::compare_cmd::run(&haul),
+        Command::Compare { haul, rect_alpha } => fishtrack::compare_cmd::run(&haul, rect_alpha),
         Command::Bench {
             haul,
             json,
