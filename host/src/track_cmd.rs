@@ -28,6 +28,7 @@ use nalgebra::{Matrix3x4, Vector3};
 use serde_json::json;
 
 use crate::columns::ColumnOffsets;
+use crate::params_file::TrackOverrides;
 use fishtrack_core::geometry::StereoGeometry;
 use fishtrack_core::image::Roi;
 use fishtrack_core::params::{Params, Tracker as Association};
@@ -84,6 +85,9 @@ pub struct Setup {
     /// Column fixed-pattern offsets of the left and right cameras
     /// ([`crate::columns`]), taken out of every raw frame.
     pub columns: [Option<ColumnOffsets>; 2],
+    /// The params file's `[track]` overrides (applied last by
+    /// [`Setup::pipeline_config`]).
+    pub track: TrackOverrides,
 }
 
 /// Parses `--tracker`.
@@ -191,9 +195,12 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
     let (width, height) = (calib.width, calib.height);
     // pixel-valued parameters follow the raw frame's scale, which every
     // rectification keeps to within a few per cent
-    let mut params = match &opts.params {
-        Some(p) => crate::params_file::load_params(p, width)?,
-        None => Params::for_frame(width),
+    let (mut params, track) = match &opts.params {
+        Some(p) => {
+            let f = crate::params_file::load_params(p, width)?;
+            (f.params, f.track)
+        }
+        None => (Params::for_frame(width), TrackOverrides::default()),
     };
     if let Some(t) = &opts.tracker {
         params.tracker = parse_tracker(t)?;
@@ -242,6 +249,7 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
         raw_width: width,
         raw_height: height,
         columns,
+        track,
     })
 }
 
@@ -257,6 +265,7 @@ impl Setup {
         // views' scale, not a canvas's size
         cfg.track.sigma_defaults = fishtrack_core::track::Sigmas::for_frame(self.raw_width);
         cfg.track.crossing_width = self.raw_width;
+        self.track.apply(&mut cfg.track);
         cfg
     }
 
@@ -770,6 +779,7 @@ fn write_summary(
             "workspace_bytes": DefaultPipeline::workspace_size(setup.width as usize, setup.height as usize),
         },
         "params": setup.params,
+        "track_overrides": setup.track,
         "column_offsets": setup.columns.iter().map(|c| serde_json::json!({
             "rms": c.as_ref().map(|c| c.rms),
             "applied": c.as_ref().is_some_and(|c| c.applied.is_some()),
