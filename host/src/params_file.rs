@@ -24,7 +24,7 @@
 //!
 //! ```toml
 //! [track]
-//! max_lost = 0      # at 2.5 fps a lost frame carries a fish ~a half frame
+//! max_lost = 0      # at 2.5 fps a lost frame carries a fish half the frame
 //! miss_cost = 24
 //! ```
 //!
@@ -138,8 +138,8 @@ pub struct ParamsFile {
 }
 
 /// The trellis depth the per-key check of `max_lost` uses: the default
-/// pipeline's ([`fishtrack_core::track::DefaultTracker`]).
-const TRELLIS_DEPTH: usize = 16;
+/// tracker's.
+const TRELLIS_DEPTH: usize = fishtrack_core::track::DefaultTracker::DEPTH;
 
 /// Reads a params TOML file for frames `frame_width` pixels wide (see the
 /// module documentation for how defaults and given keys combine).

@@ -736,6 +736,9 @@ struct Recent {
 impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: usize>
     Tracker<T, D, K, H, N>
 {
+    /// Trellis depth D (stages held before the oldest is committed).
+    pub const DEPTH: usize = D;
+
     /// A tracker with no targets. Fails on an invalid configuration or
     /// capacities (D ≥ 2, 2 ≤ K ≤ 255, 1 ≤ N < 65535, T ≥ 1).
     pub fn new(cfg: TrackConfig) -> Result<Self, TrackError> {
