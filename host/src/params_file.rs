@@ -250,6 +250,16 @@ mod tests {
         (e.to_string(), p.display().to_string())
     }
 
+    /// Each `(text, key)`: loading `text` for `width`-pixel frames fails
+    /// with an error that starts with the file and names `key`.
+    fn assert_errors_name_keys(cases: &[(&str, &str)], width: u32) {
+        for (text, key) in cases {
+            let (e, p) = err(text, width);
+            assert!(e.starts_with(&p), "{e}");
+            assert!(e.contains(&format!("`{key}`")), "{text}: {e}");
+        }
+    }
+
     #[test]
     fn empty_file_is_scaled_defaults() {
         let (_t, p) = write("# nothing\n");
@@ -292,35 +302,33 @@ mod tests {
 
     #[test]
     fn wrong_type_names_key() {
-        for (text, key) in [
-            ("p_low = \"high\"\n", "p_low"),
-            ("area_min = 2.5\n", "area_min"),
-            ("margin = -4\n", "margin"),
-            ("hist_bins = 300\n", "hist_bins"),
-            ("double_threshold = 1\n", "double_threshold"),
-            ("tracker = \"kalman\"\n", "tracker"),
-        ] {
-            let (e, p) = err(text, 2048);
-            assert!(e.starts_with(&p), "{e}");
-            assert!(e.contains(&format!("`{key}`")), "{text}: {e}");
-        }
+        assert_errors_name_keys(
+            &[
+                ("p_low = \"high\"\n", "p_low"),
+                ("area_min = 2.5\n", "area_min"),
+                ("margin = -4\n", "margin"),
+                ("hist_bins = 300\n", "hist_bins"),
+                ("double_threshold = 1\n", "double_threshold"),
+                ("tracker = \"kalman\"\n", "tracker"),
+            ],
+            2048,
+        );
     }
 
     #[test]
     fn validation_failure_names_key() {
-        for (text, key) in [
-            ("alpha = 1.5\n", "alpha"),
-            ("p_high = 0.9\np_low = 0.5\n", "p_high"),
-            ("hist_bins = 12\n", "hist_bins"),
-            ("disk_size = 6\n", "disk_size"),
-            // Given area_max is below the *scaled* default area_min (125 at 512 px).
-            ("area_max = 100\n", "area_max"),
-            ("theta_sad = nan\n", "theta_sad"),
-        ] {
-            let (e, p) = err(text, 512);
-            assert!(e.starts_with(&p), "{e}");
-            assert!(e.contains(&format!("`{key}`")), "{text}: {e}");
-        }
+        assert_errors_name_keys(
+            &[
+                ("alpha = 1.5\n", "alpha"),
+                ("p_high = 0.9\np_low = 0.5\n", "p_high"),
+                ("hist_bins = 12\n", "hist_bins"),
+                ("disk_size = 6\n", "disk_size"),
+                // Given area_max is below the *scaled* default area_min (125 at 512 px).
+                ("area_max = 100\n", "area_max"),
+                ("theta_sad = nan\n", "theta_sad"),
+            ],
+            512,
+        );
         // Valid once area_min is given too (taken as-is at any width).
         let (_t, p) = write("area_max = 100\narea_min = 50\n");
         assert_eq!(load_params(&p, 2048).unwrap().params.area_max, 100);
@@ -341,18 +349,17 @@ mod tests {
             ..TrackConfig::for_frame(2048, 2048)
         };
         assert_eq!(cfg, want);
-        for (text, key) in [
-            ("[track]\nmax_los = 1\n", "track.max_los"),
-            ("[track]\nmax_lost = -1\n", "track.max_lost"),
-            ("[track]\nmax_lost = 15\n", "track.max_lost"),
-            ("[track]\nmiss_cost = 0\n", "track.miss_cost"),
-            ("[track]\nfold_shared = 1\n", "track.fold_shared"),
-            ("track = 3\n", "track"),
-        ] {
-            let (e, p) = err(text, 2048);
-            assert!(e.starts_with(&p), "{e}");
-            assert!(e.contains(&format!("`{key}`")), "{text}: {e}");
-        }
+        assert_errors_name_keys(
+            &[
+                ("[track]\nmax_los = 1\n", "track.max_los"),
+                ("[track]\nmax_lost = -1\n", "track.max_lost"),
+                ("[track]\nmax_lost = 15\n", "track.max_lost"),
+                ("[track]\nmiss_cost = 0\n", "track.miss_cost"),
+                ("[track]\nfold_shared = 1\n", "track.fold_shared"),
+                ("track = 3\n", "track"),
+            ],
+            2048,
+        );
     }
 
     #[test]

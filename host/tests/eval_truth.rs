@@ -499,8 +499,9 @@ fn eval_mot_figures_agree_with_motmetrics_on_degraded_outputs() {
     );
 }
 
-#[test]
-fn cli_eval_prints_table_and_json_and_rejects_bad_input() {
+/// A haul holding only the test truth, and an output directory holding
+/// its perfect tracker output (for runs of the `fishtrack` binary).
+fn cli_haul() -> (tempfile::TempDir, tempfile::TempDir) {
     let t = truth();
     let haul = tempfile::tempdir().unwrap();
     let out = tempfile::tempdir().unwrap();
@@ -509,6 +510,12 @@ fn cli_eval_prints_table_and_json_and_rejects_bad_input() {
         &serde_json::to_string(&t).unwrap(),
     );
     perfect_output(out.path(), &t);
+    (haul, out)
+}
+
+#[test]
+fn cli_eval_prints_table_and_json_and_rejects_bad_input() {
+    let (haul, out) = cli_haul();
     let bin = env!("CARGO_BIN_EXE_fishtrack");
     let run = |json: bool| {
         let mut c = std::process::Command::new(bin);
@@ -552,14 +559,7 @@ fn cli_eval_prints_table_and_json_and_rejects_bad_input() {
 #[test]
 fn cli_eval_into_a_closed_pipe_ends_quietly() {
     use std::process::{Command, Stdio};
-    let t = truth();
-    let haul = tempfile::tempdir().unwrap();
-    let out = tempfile::tempdir().unwrap();
-    write(
-        &haul.path().join("truth.json"),
-        &serde_json::to_string(&t).unwrap(),
-    );
-    perfect_output(out.path(), &t);
+    let (haul, out) = cli_haul();
     let bin = env!("CARGO_BIN_EXE_fishtrack");
     let run = |out_dir: &std::path::Path| {
         let mut child = Command::new(bin)
