@@ -50,12 +50,18 @@ impl Tally {
     }
 }
 
-/// Runs the comparison on `dir`, rectified with `rect_alpha` (as `fishtrack
-/// track --rect-alpha`; the default scaling when `None`), and prints the
-/// table; errors when any criterion fails.
-pub fn run(dir: &Path, rect_alpha: Option<crate::rectify::Scaling>) -> Result<()> {
+/// Runs the comparison on `dir`, rectified with `rect_alpha` and tracked at
+/// frame rate `fps` (as `fishtrack track --rect-alpha … --fps …`; the
+/// defaults when `None`), and prints the table; errors when any criterion
+/// fails.
+pub fn run(
+    dir: &Path,
+    rect_alpha: Option<crate::rectify::Scaling>,
+    fps: Option<f64>,
+) -> Result<()> {
     let opts = TrackOptions {
         rect_alpha,
+        fps,
         ..TrackOptions::default()
     };
     let setup = prepare(dir, &opts)?;

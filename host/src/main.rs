@@ -74,6 +74,12 @@ enum Command {
         /// raw pixel (the views' edges filled with water).
         #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
         rect_alpha: Option<fishtrack::rectify::Scaling>,
+        /// The haul's frame rate, frames per second (default 5, the
+        /// Cam-trawl's). It scales a newborn fish's first predicted step
+        /// (fish cross the view in about 4.3 frames at 5 fps) and is
+        /// written to the VIAME CSV.
+        #[arg(long)]
+        fps: Option<f64>,
     },
     /// Score a tracker output directory against HAUL/truth.json.
     Eval {
@@ -92,6 +98,9 @@ enum Command {
         /// Rectification free scaling, as for `track` (default 0.25).
         #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
         rect_alpha: Option<fishtrack::rectify::Scaling>,
+        /// The haul's frame rate, as for `track` (default 5).
+        #[arg(long)]
+        fps: Option<f64>,
     },
     /// Per-stage timing, pairs per second and memory on a haul.
     Bench {
@@ -158,6 +167,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             overlays,
             tracker,
             rect_alpha,
+            fps,
         } => fishtrack::track_cmd::run(
             &haul,
             &out,
@@ -166,6 +176,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 tracker,
                 overlays,
                 rect_alpha,
+                fps,
             },
         ),
         Command::Eval { haul, out, json } => {
@@ -177,7 +188,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Compare { haul, rect_alpha } => fishtrack::compare_cmd::run(&haul, rect_alpha),
+        Command::Compare {
+            haul,
+            rect_alpha,
+            fps,
+        } => fishtrack::compare_cmd::run(&haul, rect_alpha, fps),
         Command::Bench {
             haul,
             json,

@@ -47,8 +47,21 @@ use crate::output::{
 };
 use crate::rectify::{in_raw_view, RectifiedCamera, Rectifier, Scaling};
 
-/// Frames per second of Cam-trawl video (VIAME metadata).
+/// Frames per second of Cam-trawl video (paper Section II): the default
+/// of `--fps`.
 pub const FPS: f64 = 5.0;
+
+/// Checks `--fps`: a frame rate in (0, 1000] frames per second.
+pub fn check_fps(fps: f64) -> Result<f64, InputError> {
+    if fps.is_finite() && fps > 0.0 && fps <= 1000.0 {
+        Ok(fps)
+    } else {
+        Err(InputError::plain(
+            "--fps",
+            format!("{fps} is not a frame rate in (0, 1000] frames per second"),
+        ))
+    }
+}
 
 /// Command-line options of `fishtrack track`.
 #[derive(Debug, Clone, Default)]
@@ -62,6 +75,8 @@ pub struct TrackOptions {
     /// `--rect-alpha auto|A`: the rectification's free scaling
     /// ([`Scaling::default`] when absent).
     pub rect_alpha: Option<Scaling>,
+    /// `--fps F`: the haul's frame rate ([`FPS`] when absent).
+    pub fps: Option<f64>,
 }
 
 /// A haul made ready for the pipeline.
@@ -88,6 +103,21 @@ pub struct Setup {
     /// The params file's `[track]` overrides (applied last by
     /// [`Setup::pipeline_config`]).
     pub track: TrackOverrides,
+    /// The haul's frame rate, frames per second (`--fps`).
+    pub fps: f64,
+}
+
+/// [`TrackConfig::crossing_width`](fishtrack_core::track::TrackConfig::crossing_width)
+/// for raw views `raw_width` pixels wide filmed at `fps`: the width a fish
+/// crosses in the paper's 4.3-frame lifespan, which it measured at 5 fps
+/// (Section II). At a lower frame rate a fish swimming at the same speed
+/// moves further per frame, so the 4.3 frames span `5 / fps` views (at
+/// 2.5 fps a fish crosses the view in about two frames). Clamped to
+/// the tracker's 1–32 000 px.
+pub fn crossing_width(raw_width: u32, fps: f64) -> u32 {
+    (f64::from(raw_width) * FPS / fps)
+        .round()
+        .clamp(1.0, 32_000.0) as u32
 }
 
 /// Parses `--tracker`.
@@ -133,6 +163,29 @@ pub fn check_alpha(a: f64) -> Result<f64, InputError> {
             "--rect-alpha",
             format!("{a} is not in [0, 1] (or negative for OpenCV's default scaling)"),
         ))
+    }
+}
+
+#[cfg(test)]
+mod fps_tests {
+    use super::*;
+
+    #[test]
+    fn crossing_width_follows_the_frame_rate() {
+        assert_eq!(crossing_width(2048, FPS), 2048);
+        assert_eq!(crossing_width(2048, 2.5), 4096);
+        assert_eq!(crossing_width(2048, 10.0), 1024);
+        assert_eq!(crossing_width(1000, 3.0), 1667);
+        // clamped to what the tracker accepts
+        assert_eq!(crossing_width(2048, 0.001), 32_000);
+        assert_eq!(crossing_width(1, 1000.0), 1);
+        for ok in [0.1, 2.5, 5.0, 1000.0] {
+            assert_eq!(check_fps(ok).unwrap(), ok);
+        }
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 1000.5] {
+            let e = check_fps(bad).unwrap_err().to_string();
+            assert!(e.contains("--fps") && e.contains("frame rate"), "{e}");
+        }
     }
 }
 
@@ -238,6 +291,7 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
             );
         }
     }
+    let fps = check_fps(opts.fps.unwrap_or(FPS))?;
     let (rect_width, rect_height) = rectifier.size();
     Ok(Setup {
         haul,
@@ -250,6 +304,7 @@ pub fn prepare(dir: &Path, opts: &TrackOptions) -> Result<Setup> {
         raw_height: height,
         columns,
         track,
+        fps,
     })
 }
 
@@ -264,7 +319,7 @@ impl Setup {
         // the cues' σ and a newborn's default velocity follow the raw
         // views' scale, not a canvas's size
         cfg.track.sigma_defaults = fishtrack_core::track::Sigmas::for_frame(self.raw_width);
-        cfg.track.crossing_width = self.raw_width;
+        cfg.track.crossing_width = crossing_width(self.raw_width, self.fps);
         self.track.apply(&mut cfg.track);
         cfg
     }
@@ -602,7 +657,7 @@ fn write_outputs(
         &tracks,
         &fish,
         &names,
-        FPS,
+        setup.fps,
     )?;
     write_stereo(&out.join("stereo.csv"), &stereo)?;
     if let Some(d) = diag {
@@ -780,6 +835,8 @@ fn write_summary(
         },
         "params": setup.params,
         "track_overrides": setup.track,
+        "fps": setup.fps,
+        "crossing_width_px": crossing_width(setup.raw_width, setup.fps),
         "column_offsets": setup.columns.iter().map(|c| serde_json::json!({
             "rms": c.as_ref().map(|c| c.rms),
             "applied": c.as_ref().is_some_and(|c| c.applied.is_some()),

@@ -273,6 +273,41 @@ fn params_file_unknown_key_or_out_of_range_names_the_key() {
     assert_bad(&out, &["--tracker", "kalman"]);
 }
 
+/// `--fps`: a bad frame rate names the flag; a good one reaches the
+/// summary and the VIAME header, and the default is the Cam-trawl's 5.
+#[test]
+fn frame_rate_flag_is_checked_and_recorded() {
+    let (_t, h) = haul(2);
+    for bad in ["0", "-5", "nan", "inf", "2000"] {
+        let (out, _) = track(&h, &[&format!("--fps={bad}")]);
+        assert_bad(&out, &["--fps", "frame rate"]);
+    }
+    for (extra, fps) in [(&[][..], 5.0), (&["--fps", "2.5"][..], 2.5)] {
+        let (out, o) = track(&h, extra);
+        assert_ok(&out);
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(o.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["fps"].as_f64(), Some(fps), "{extra:?}");
+        // a newborn's first step spans the view in 4.3 frames at 5 fps, in
+        // about 2 at 2.5 fps
+        let raw = image::image_dimensions(h.join("left/000001.png"))
+            .unwrap()
+            .0;
+        let want = (f64::from(raw) * 5.0 / fps).round();
+        assert_eq!(
+            summary["crossing_width_px"].as_f64(),
+            Some(want),
+            "{extra:?}"
+        );
+        let viame = std::fs::read_to_string(o.join("detections.viame.csv")).unwrap();
+        let meta = viame.lines().nth(1).unwrap();
+        assert!(
+            meta.starts_with(&format!("# metadata,fps: {fps},")),
+            "{meta}"
+        );
+    }
+}
+
 #[test]
 fn output_directory_that_cannot_be_created_or_written() {
     let (t, h) = haul(2);
