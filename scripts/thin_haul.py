@@ -3,7 +3,8 @@
 Table V at 2.5 fps): keeps frames 1, 1+k, 1+2k, ... renumbered from 1,
 halves (divides by k) truth.json's fps, and keeps each fish's truth rows
 on the kept frames (fish seen on none are dropped). Images are hard-linked
-(copied across file systems).
+(copied across file systems). The truth is thinned as `truth_obs::thin_truth`
+(host) thins it for the in-process tracking tests, which read no images.
 
     python3 scripts/thin_haul.py HAUL OUT [--every K]   # K defaults to 2
 """

@@ -836,7 +836,7 @@ fn write_summary(
         "params": setup.params,
         "track_overrides": setup.track,
         "fps": setup.fps,
-        "crossing_width_px": crossing_width(setup.raw_width, setup.fps),
+        "crossing_width_px": setup.pipeline_config().track.crossing_width,
         "column_offsets": setup.columns.iter().map(|c| serde_json::json!({
             "rms": c.as_ref().map(|c| c.rms),
             "applied": c.as_ref().is_some_and(|c| c.applied.is_some()),
