@@ -107,15 +107,15 @@ impl SearchScore {
 
 /// One template segment: row `y`, left columns `[x0, x1)`.
 #[derive(Debug, Clone, Copy)]
-struct Seg {
-    y: u32,
-    x0: u32,
-    x1: u32,
+pub(crate) struct Seg {
+    pub(crate) y: u32,
+    pub(crate) x0: u32,
+    pub(crate) x1: u32,
 }
 
 /// The widened, merged template segments of `runs` (sorted by row, then
 /// column, as segmentation writes them; an unsorted mask only merges less).
-fn template<'a>(runs: &'a [Run], m: u32, width: u32) -> impl Iterator<Item = Seg> + 'a {
+pub(crate) fn template<'a>(runs: &'a [Run], m: u32, width: u32) -> impl Iterator<Item = Seg> + 'a {
     let mut it = runs.iter().filter(|r| !r.is_empty()).peekable();
     core::iter::from_fn(move || loop {
         let r = it.next()?;

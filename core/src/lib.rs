@@ -32,6 +32,7 @@ pub mod photometric;
 pub mod pipeline;
 pub mod refine;
 pub mod remap;
+pub mod slant;
 pub mod snake;
 pub mod stereo;
 pub mod strobe;

@@ -8,6 +8,7 @@ pub mod compare;
 pub mod epipolar;
 pub mod photometric;
 pub mod segment;
+pub mod slant;
 pub mod split;
 pub mod stereo;
 pub mod track;

@@ -957,6 +957,30 @@ pub fn length(
     } else {
         (p.d_o, 0.0)
     };
+    // the slanted fit on the whole widened mask (core: `slant::fit_slant`)
+    let (a, b) = if cfg.slant_fit {
+        let ax = super::slant::Axis {
+            c: lo.centre,
+            u,
+            t: (t_lo, t_hi),
+        };
+        let m = ((lo.h_o / 4.0).floor() as i64).max(4);
+        let starts = [
+            (a + b * t_lo, a + b * t_hi),
+            (mask_d[0], mask_d[1]),
+            (p.d_o, p.d_o),
+        ];
+        match super::slant::fit(l, r, lo, m, &ax, &starts) {
+            Some((d0, d1)) => {
+                let span = t_hi - t_lo;
+                let b = if span > 1e-3 { (d1 - d0) / span } else { 0.0 };
+                (d0 - b * t_lo, b)
+            }
+            None => (a, b),
+        }
+    } else {
+        (a, b)
+    };
     let mut ends = [Vector3::zeros(); 2];
     let mut consistent = true;
     let t_orig = [t_lo, t_hi];

@@ -25,6 +25,9 @@ pub struct Fish {
     pub tail_grey: f64,
     /// Texture seed.
     pub seed: u32,
+    /// Body texture amplitude, grey levels (35 by default; a few for the
+    /// smooth, low-contrast bodies of the synthetic hauls).
+    pub texture: f64,
 }
 
 impl Fish {
@@ -139,7 +142,7 @@ fn shade(
     // body: ellipse over s ∈ [0, 0.8]
     let e = (s - 0.4) / 0.4;
     if e.abs() <= 1.0 && v.abs() <= (1.0 - e * e).sqrt() {
-        return Some((true, 120.0 + 35.0 * tex - 25.0 * v.abs()));
+        return Some((true, 120.0 + fish.texture * tex - 25.0 * v.abs()));
     }
     // tail fan over s ∈ [0.78, 1]
     if s >= 0.78 && v.abs() <= 0.15 + 0.55 * (s - 0.78) / 0.22 {
@@ -371,5 +374,6 @@ pub fn fish_at(x: f64, y: f64, z: f64, dir: [f64; 3], len: f64, tail_grey: f64, 
         height: len * 0.22,
         tail_grey,
         seed,
+        texture: 35.0,
     }
 }
