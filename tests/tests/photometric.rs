@@ -3,11 +3,13 @@
 //! pairs, seed 2) and its copy with every right frame × 0.7. The pipeline
 //! must estimate the mismatch from its stereo pairs, map the right view
 //! and measure about as many 3-D lengths, as well, as on the matched haul;
-//! with the match turned off it measures far fewer (the test shows the
-//! failure it guards against); and the float reference agrees with the
-//! core on the mismatched haul (`fishtrack compare`). A third copy's right
-//! frames change with every flash ([`FLASH`]: each right frame × its own
-//! factor, 0.7–1.3): the flash factor of the water levels follows them.
+//! and the float reference agrees with the core on the mismatched haul
+//! (`fishtrack compare`). A third copy's right frames change with every
+//! flash ([`FLASH`]: each right frame × its own factor, 0.7–1.3): the
+//! frames' maps follow them. (Until session 30 the match turned off also
+//! cost most of the lengths — the block line's SAD saw the mismatch; the
+//! slanted fit's zero-mean SAD does not, and off now measures about as
+//! many: 29 against 30 on the mismatched haul, 30 against 31 flickering.)
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -71,9 +73,9 @@ fn hauls() -> &'static (PathBuf, PathBuf) {
     })
 }
 
-/// `(gain_median, 3-D lengths measured, per-frame 3-D MAPE)` of a track +
-/// eval run with `photometric` set.
-fn run_case(haul: &Path, photometric: bool) -> (f64, u64, Option<f64>) {
+/// `(gain_median, 3-D lengths measured, per-frame 3-D MAPE, frames
+/// mapped)` of a track + eval run with `photometric` set.
+fn run_case(haul: &Path, photometric: bool) -> (f64, u64, Option<f64>, u64) {
     let dir = tempfile::tempdir().unwrap();
     let params = dir.path().join("p.toml");
     std::fs::write(&params, format!("photometric = {photometric}\n")).unwrap();
@@ -92,6 +94,7 @@ fn run_case(haul: &Path, photometric: bool) -> (f64, u64, Option<f64>) {
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap())
             .unwrap();
     let gain = summary["photometric"]["gain_median"].as_f64().unwrap();
+    let mapped = summary["photometric"]["frames_mapped"].as_u64().unwrap();
     let ev = run(&[
         "eval",
         haul.to_str().unwrap(),
@@ -101,18 +104,24 @@ fn run_case(haul: &Path, photometric: bool) -> (f64, u64, Option<f64>) {
     assert!(ev.status.success(), "eval: {}", text(&ev.stderr));
     let e: serde_json::Value = serde_json::from_slice(&ev.stdout).unwrap();
     let l = &e["stereo"]["length"];
-    (gain, l["measured"].as_u64().unwrap(), l["mape"].as_f64())
+    (
+        gain,
+        l["measured"].as_u64().unwrap(),
+        l["mape"].as_f64(),
+        mapped,
+    )
 }
 
 #[test]
 fn a_gain_mismatch_between_the_cameras_is_estimated_and_mapped_away() {
     let (h, g) = hauls();
-    let (g_matched, n_matched, mape_matched) = run_case(h, true);
-    let (g_on, n_on, mape_on) = run_case(g, true);
-    let (_, n_off, _) = run_case(g, false);
+    let (g_matched, n_matched, mape_matched, m_matched) = run_case(h, true);
+    let (g_on, n_on, mape_on, m_on) = run_case(g, true);
+    let (_, n_off, mape_off, m_off) = run_case(g, false);
     eprintln!(
-        "matched: gain {g_matched:.3}, {n_matched} measured, MAPE {mape_matched:?}; \
-         × {GAIN}: gain {g_on:.3}, {n_on} measured, MAPE {mape_on:?}; off: {n_off} measured"
+        "matched: gain {g_matched:.3}, {n_matched} measured, MAPE {mape_matched:?}, \
+         {m_matched} frames mapped; × {GAIN}: gain {g_on:.3}, {n_on} measured, MAPE \
+         {mape_on:?}, {m_on} mapped; off: {n_off} measured, MAPE {mape_off:?}"
     );
     // the estimate sees the right view's 0.7 (relative to the matched
     // haul's own estimate: the synthetic views differ by a few per cent)
@@ -121,13 +130,14 @@ fn a_gain_mismatch_between_the_cameras_is_estimated_and_mapped_away() {
         ((g_on / g_matched) / want - 1.0).abs() < 0.04,
         "gain {g_on} / {g_matched}, want × {want}"
     );
+    // every frame of the mismatched haul is mapped (16 pairs; the first
+    // gives no estimate yet), few of the matched one, none when off
+    assert!(
+        m_on >= 14 && m_matched <= 4 && m_off == 0,
+        "{m_on} {m_matched} {m_off}"
+    );
     // mapped: about as many lengths as the matched haul, about as good
     assert_like_matched((n_on, mape_on), (n_matched, mape_matched));
-    // without the match the mismatch costs most of the lengths
-    assert!(
-        (n_off as f64) < 0.6 * n_on as f64,
-        "{n_off} measured without the match vs {n_on} with it"
-    );
 }
 
 /// At least 85 % of the matched haul's lengths, and a per-frame MAPE
@@ -169,23 +179,26 @@ fn flickering() -> &'static PathBuf {
 fn a_right_camera_that_flickers_flash_to_flash_is_followed() {
     let (h, _) = hauls();
     let f = flickering();
-    let (_, n_matched, mape_matched) = run_case(h, true);
-    let (_, n_on, mape_on) = run_case(f, true);
-    let (_, n_off, _) = run_case(f, false);
+    let (_, n_matched, mape_matched, m_matched) = run_case(h, true);
+    let (_, n_on, mape_on, m_on) = run_case(f, true);
+    let (_, n_off, mape_off, _) = run_case(f, false);
     eprintln!(
-        "{}: matched {n_matched} measured, MAPE {mape_matched:?}; \
-         flickering: {n_on} measured, MAPE {mape_on:?}; off: {n_off} measured",
+        "{}: matched {n_matched} measured, MAPE {mape_matched:?}, {m_matched} mapped; \
+         flickering: {n_on} measured, MAPE {mape_on:?}, {m_on} mapped; off: {n_off} \
+         measured, MAPE {mape_off:?}",
         f.display()
     );
-    // the frames' maps follow the flashes: about as many lengths as the
-    // matched haul, about as good (the rig's pool alone, session 9's code,
-    // which cannot follow one flash, measured 17 where the matched haul
-    // gives 25)
-    assert_like_matched((n_on, mape_on), (n_matched, mape_matched));
+    // the frames' maps follow the flashes: the frames whose flash is off
+    // by more than 10 % (12 of 16) are mapped, and the lengths are about
+    // as many and as good as the matched haul's (the rig's pool alone,
+    // session 9's code, which cannot follow one flash, measured 17 where
+    // the matched haul gave 25)
+    let off_by_tenth = FLASH.iter().filter(|&&k| (k - 1.0).abs() > 0.1).count() as u64;
     assert!(
-        (n_off as f64) < 0.8 * n_matched as f64,
-        "{n_off} measured without the match vs {n_on} with it"
+        m_on + 2 >= off_by_tenth && m_on >= m_matched + 8,
+        "{m_on} frames mapped ({off_by_tenth} flashes off by > 10 %, matched haul {m_matched})"
     );
+    assert_like_matched((n_on, mape_on), (n_matched, mape_matched));
 }
 
 #[test]
