@@ -190,6 +190,13 @@ pub struct LengthConfig {
     /// mask ([`crate::slant`]) from the block line, the mask ends' chord
     /// and `d_o`, instead of taken from the block line alone.
     pub slant_fit: bool,
+    /// Beyond the paper: where no snake extended either end, a dim fin is
+    /// looked for by its averaged intensity profile ([`crate::fin`]) in
+    /// both views, and the end it continues is extended to its reach.
+    pub fin_profile: bool,
+    /// The fin profile's start must stand this many times its own noise
+    /// (`σ_bg/√(2J + 1)`) above the background.
+    pub fin_noise_k: f32,
 }
 
 impl Default for LengthConfig {
@@ -212,6 +219,8 @@ impl Default for LengthConfig {
             gate_extended_ends: true,
             occlusion_radius_fraction: 0.25,
             slant_fit: true,
+            fin_profile: true,
+            fin_noise_k: 4.0,
         }
     }
 }
@@ -719,6 +728,58 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     } else {
         (a, b)
     };
+    // a dim fin by its averaged profile, where no snake extended an end
+    if params.tail_compensation && cfg.fin_profile && !out.ends.iter().any(|e| e.compensated) {
+        let body = t_hi - t_lo;
+        let len = ((cfg.max_tail_fraction * body) as u32).clamp(8, crate::fin::MAX_PROFILE as u32);
+        let half = ((h_o / 3.0) as u32).max(2);
+        let mut reach = [None::<f32>; 2];
+        for (e, s) in [(0usize, -1.0f32), (1, 1.0)] {
+            let t = ts[e];
+            let probe = crate::fin::FinProbe {
+                end: (cx + t * ux, cy + t * uy),
+                dir: (s * ux, s * uy),
+                half,
+                len,
+            };
+            let contrast = lo.mean - bg.0;
+            let rcontrast = ro.mean - rbg.0;
+            let lr =
+                crate::fin::fin_reach(left_img, &probe, |_| 0.0, bg.1, contrast, cfg.fin_noise_k);
+            let rr = crate::fin::fin_reach(
+                right_img,
+                &probe,
+                |k| a + b * (t + s * k),
+                rbg.1,
+                rcontrast,
+                cfg.fin_noise_k,
+            );
+            if let (Some(rl), Some(rr)) = (lr, rr) {
+                let lim = (len - 1) as f32;
+                if rl >= 3.0
+                    && rr >= 3.0
+                    && rl < lim
+                    && rr < lim
+                    && (rl - rr).abs() <= (0.3 * rl).max(4.0)
+                {
+                    if let Some(r) = reach.get_mut(e) {
+                        *r = Some(rl.min(rr));
+                    }
+                }
+            }
+        }
+        let one = match reach {
+            [Some(r), None] => Some((0usize, -1.0f32, r)),
+            [None, Some(r)] => Some((1, 1.0, r)),
+            _ => None,
+        };
+        if let Some((e, s, r)) = one {
+            if let (Some(t), Some(fe)) = (ts.get_mut(e), out.ends.get_mut(e)) {
+                *t += s * r;
+                fe.compensated = true;
+            }
+        }
+    }
     out.slope = b;
     let mut xyz = [Vector3::zeros(); 2];
     let t_orig = [t_lo, t_hi];

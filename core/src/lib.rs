@@ -22,6 +22,7 @@
 
 pub mod epipolar;
 pub mod error;
+pub mod fin;
 pub mod geometry;
 pub mod image;
 pub mod length;

@@ -6,6 +6,7 @@
 pub mod background;
 pub mod compare;
 pub mod epipolar;
+pub mod fin;
 pub mod photometric;
 pub mod segment;
 pub mod slant;

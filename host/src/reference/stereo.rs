@@ -981,6 +981,53 @@ pub fn length(
     } else {
         (a, b)
     };
+    // a dim fin by its averaged profile where no snake extended an end
+    // (core: `fin::fin_reach` in `length::measure_length`)
+    if params.tail_compensation && cfg.fin_profile && !comp[0] && !comp[1] {
+        let len = ((cfg.max_tail_fraction as f64 * (t_hi - t_lo)) as usize).clamp(8, 1024);
+        let half = ((h_o / 3.0) as i64).max(2);
+        let k = cfg.fin_noise_k as f64;
+        let mut reach = [None::<f64>; 2];
+        for (e, s) in [(0usize, -1.0f64), (1, 1.0)] {
+            let t = ts[e];
+            let end = (lo.centre.0 + t * u.0, lo.centre.1 + t * u.1);
+            let dir = (s * u.0, s * u.1);
+            let lr = super::fin::reach(l, end, dir, half, len, |_| 0.0, bg.1, lo.mean - bg.0, k);
+            let rr = super::fin::reach(
+                r,
+                end,
+                dir,
+                half,
+                len,
+                |q| a + b * (t + s * q),
+                rbg.1,
+                ro.mean - rbg.0,
+                k,
+            );
+            if let (Some(rl), Some(rr)) = (lr, rr) {
+                let lim = (len - 1) as f64;
+                if rl >= 3.0
+                    && rr >= 3.0
+                    && rl < lim
+                    && rr < lim
+                    && (rl - rr).abs() <= (0.3 * rl).max(4.0)
+                {
+                    reach[e] = Some(rl.min(rr));
+                }
+            }
+        }
+        match reach {
+            [Some(q), None] => {
+                ts[0] -= q;
+                comp[0] = true;
+            }
+            [None, Some(q)] => {
+                ts[1] += q;
+                comp[1] = true;
+            }
+            _ => {}
+        }
+    }
     let mut ends = [Vector3::zeros(); 2];
     let mut consistent = true;
     let t_orig = [t_lo, t_hi];
