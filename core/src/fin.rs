@@ -25,10 +25,45 @@
 //!   The two views' reaches must agree (within 30 % or 4 px); the end moves
 //!   out by the smaller one, at most `max_fraction` of the body's length.
 //!
+//! - Only at the tail: the end whose last tenth of the mask holds fewer
+//!   pixels than the other's ([`end_slabs`]; a fish tapers to its tail
+//!   and is blunt at its head — something dim beyond the head is glow or a
+//!   neighbour, not a fin).
+//!
 //! Bounded work: `K ≤ 1024` samples of `2J + 1 ≤ 513` pixels per view;
 //! memory: the profile (`K` floats, 4 KiB) on the stack. No heap, no panic.
 
 use crate::image::ImageView;
+use crate::object::Run;
+
+/// Mask pixels within `frac` of the length of each end along the axis
+/// (`t ≤ t_lo + frac·(t_hi − t_lo)` and `t ≥ t_hi − frac·(t_hi − t_lo)`):
+/// a fish tapers to its tail (the caudal peduncle, whose fin may be lost)
+/// and is blunt at its head, so the tail is the end with the smaller slab.
+pub fn end_slabs(
+    runs: &[Run],
+    centre: (f32, f32),
+    dir: (f32, f32),
+    t: (f32, f32),
+    frac: f32,
+) -> (u32, u32) {
+    let span = t.1 - t.0;
+    let (lo, hi) = (t.0 + frac * span, t.1 - frac * span);
+    let (mut a, mut b) = (0u32, 0u32);
+    for r in runs {
+        let yy = (r.y as f32 - centre.1) * dir.1;
+        for x in r.x0..r.x1 {
+            let tt = (x as f32 - centre.0) * dir.0 + yy;
+            if tt <= lo {
+                a = a.saturating_add(1);
+            }
+            if tt >= hi {
+                b = b.saturating_add(1);
+            }
+        }
+    }
+    (a, b)
+}
 
 /// Longest profile, pixels.
 pub const MAX_PROFILE: usize = 1024;

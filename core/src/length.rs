@@ -197,6 +197,11 @@ pub struct LengthConfig {
     /// The fin profile's start must stand this many times its own noise
     /// (`σ_bg/√(2J + 1)`) above the background.
     pub fin_noise_k: f32,
+    /// Beyond the paper: the snake extends an end eq. (15) did not flag
+    /// only at the tail, the end whose last tenth of the mask holds fewer
+    /// pixels ([`crate::fin::end_slabs`]; a fish tapers to its tail and is
+    /// blunt at its head). The fin profile always keeps to the tail.
+    pub tail_by_taper: bool,
 }
 
 impl Default for LengthConfig {
@@ -221,6 +226,7 @@ impl Default for LengthConfig {
             slant_fit: true,
             fin_profile: true,
             fin_noise_k: 4.0,
+            tail_by_taper: true,
         }
     }
 }
@@ -578,6 +584,7 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     let bg = background_level(left_img, lo.bbox, (h_o * 0.5) as u32);
     let rh_o = (2.0 * ro.obb.half_h).clamp(2.0, 1024.0);
     let rbg = background_level(right_img, ro.bbox, (rh_o * 0.5) as u32);
+    let slabs = crate::fin::end_slabs(lruns, (cx, cy), (ux, uy), (t_lo, t_hi), 0.1);
     for (e, s) in [(0usize, -1.0f32), (1, 1.0)] {
         let t = ts[e];
         let end = (cx + t * ux, cy + t * uy);
@@ -656,7 +663,20 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
             // a fin is a fan about as tall as the body: a thin bright line
             // (the mesh) reaching far is not one
             let fan = sn.area * sn.inside_fraction >= cfg.min_fin_fill * sn.far_t * h_o;
-            if sn.accepted && agree && fan && sn.far_t <= cfg.max_tail_fraction * (t_hi - t_lo) {
+            // an end eq. (15) did not flag is extended only at the tail:
+            // the end whose last tenth holds fewer mask pixels
+            let tail = flagged
+                || !cfg.tail_by_taper
+                || match e {
+                    0 => slabs.0 < slabs.1,
+                    _ => slabs.1 < slabs.0,
+                };
+            if sn.accepted
+                && agree
+                && fan
+                && tail
+                && sn.far_t <= cfg.max_tail_fraction * (t_hi - t_lo)
+            {
                 ts[e] = t + s * sn.far_t;
                 fe.compensated = true;
             }
@@ -769,8 +789,8 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
             }
         }
         let one = match reach {
-            [Some(r), None] => Some((0usize, -1.0f32, r)),
-            [None, Some(r)] => Some((1, 1.0, r)),
+            [Some(r), None] if slabs.0 < slabs.1 => Some((0usize, -1.0f32, r)),
+            [None, Some(r)] if slabs.1 < slabs.0 => Some((1, 1.0, r)),
             _ => None,
         };
         if let Some((e, s, r)) = one {

@@ -831,6 +831,21 @@ pub fn length(
     let mut comp = [false; 2];
     let mut mask_d = [0.0f64; 2];
     let mut flagged_ends = [false; 2];
+    // mask pixels in the last tenth of each end (core: `fin::end_slabs`):
+    // a fish tapers to its tail and is blunt at its head
+    let span = t_hi - t_lo;
+    let t_of =
+        |&(x, y): &(i64, i64)| (x as f64 - lo.centre.0) * u.0 + (y as f64 - lo.centre.1) * u.1;
+    let slab0 = lo
+        .pixels
+        .iter()
+        .filter(|q| t_of(q) <= t_lo + 0.1 * span)
+        .count();
+    let slab1 = lo
+        .pixels
+        .iter()
+        .filter(|q| t_of(q) >= t_hi - 0.1 * span)
+        .count();
     for (e, s) in [(0usize, -1.0f64), (1, 1.0)] {
         let end = (lo.centre.0 + ts[e] * u.0, lo.centre.1 + ts[e] * u.1);
         let &(re, rs) = rends.iter().min_by(|a, b| {
@@ -909,7 +924,11 @@ pub fn length(
                     )
                     .is_some_and(|(rfar, _)| (rfar - far).abs() <= (0.3 * far).max(4.0));
                 let fan = filled >= cfg.min_fin_fill as f64 * far * h_o;
-                if agree && fan && far <= cfg.max_tail_fraction as f64 * (t_hi - t_lo) {
+                // an end eq. (15) did not flag: only the tail (the smaller slab)
+                let tail = flagged
+                    || !cfg.tail_by_taper
+                    || if e == 0 { slab0 < slab1 } else { slab1 < slab0 };
+                if agree && fan && tail && far <= cfg.max_tail_fraction as f64 * (t_hi - t_lo) {
                     ts[e] += s * far;
                     comp[e] = true;
                 }
@@ -1016,12 +1035,13 @@ pub fn length(
                 }
             }
         }
+        // only at the tail: the end whose last tenth holds fewer pixels
         match reach {
-            [Some(q), None] => {
+            [Some(q), None] if slab0 < slab1 => {
                 ts[0] -= q;
                 comp[0] = true;
             }
-            [None, Some(q)] => {
+            [None, Some(q)] if slab1 < slab0 => {
                 ts[1] += q;
                 comp[1] = true;
             }
