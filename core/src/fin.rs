@@ -267,4 +267,52 @@ mod tests {
         p.len = u32::MAX;
         let _ = fin_reach(&v, &p, |_| f32::INFINITY, f32::NAN, 50.0, 4.0);
     }
+
+    #[test]
+    fn the_tapered_end_has_the_smaller_slab() {
+        // a wedge: 41 rows tall at x = 0, 1 row at x = 100
+        let mut runs = Vec::new();
+        for y in 0..41u16 {
+            let half = (y as i32 - 20).unsigned_abs() as u16;
+            runs.push(Run {
+                y,
+                x0: 0,
+                x1: 100 - 5 * half.min(20),
+            });
+        }
+        let (blunt, taper) = end_slabs(&runs, (50.0, 20.0), (1.0, 0.0), (-50.0, 50.0), 0.1);
+        assert!(taper < blunt, "{blunt} {taper}");
+        // seen the other way round, the other end
+        let (taper2, blunt2) = end_slabs(&runs, (50.0, 20.0), (-1.0, 0.0), (-50.0, 50.0), 0.1);
+        assert_eq!((taper2, blunt2), (taper, blunt));
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// Random images and probes: never a panic; a reach lies within the
+        /// profile; the end slabs never count more pixels than the mask.
+        #[test]
+        fn reach_and_slabs_never_panic(
+            seed in 0u32..1000,
+            w in 1usize..64,
+            h in 1usize..32,
+            p in (-10.0f32..80.0, -10.0f32..40.0, -1.0f32..1.0, 0u32..40, 0u32..200),
+            shift in -20.0f32..20.0,
+            noise in 0.0f32..5.0,
+            runs in proptest::collection::vec((0u16..40, 0u16..80, 0u16..20), 0..20),
+        ) {
+            let mut st = seed.wrapping_mul(2_654_435_761).wrapping_add(1);
+            let img: Vec<u8> = (0..w * h).map(|_| { st = st.wrapping_mul(1_664_525).wrapping_add(1_013_904_223); (st >> 24) as u8 }).collect();
+            let v = ImageView::packed(&img, w, h).unwrap();
+            let a = p.2 * 3.2;
+            let probe = FinProbe { end: (p.0, p.1), dir: (libm::cosf(a), libm::sinf(a)), half: p.3, len: p.4 };
+            if let Some(r) = fin_reach(&v, &probe, |k| shift * k / 10.0, noise, 60.0, 4.0) {
+                proptest::prop_assert!(r >= 0.0 && r <= p.4.clamp(1, MAX_PROFILE as u32) as f32);
+            }
+            let rs: Vec<Run> = runs.iter().map(|&(y, x0, n)| Run { y, x0, x1: x0.saturating_add(n) }).collect();
+            let area: u32 = rs.iter().map(|r| r.len()).sum();
+            let (s0, s1) = end_slabs(&rs, (20.0, 10.0), (libm::cosf(a), libm::sinf(a)), (-30.0, 30.0), 0.1);
+            proptest::prop_assert!(s0 <= area && s1 <= area);
+        }
+    }
 }

@@ -200,7 +200,7 @@ pub struct LengthConfig {
     /// Beyond the paper: the snake extends an end eq. (15) did not flag
     /// only at the tail, the end whose last tenth of the mask holds fewer
     /// pixels ([`crate::fin::end_slabs`]; a fish tapers to its tail and is
-    /// blunt at its head). The fin profile always keeps to the tail.
+    /// blunt at its head), and so does the fin profile.
     pub tail_by_taper: bool,
 }
 
@@ -788,9 +788,10 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
                 }
             }
         }
+        let taper = !cfg.tail_by_taper;
         let one = match reach {
-            [Some(r), None] if slabs.0 < slabs.1 => Some((0usize, -1.0f32, r)),
-            [None, Some(r)] if slabs.1 < slabs.0 => Some((1, 1.0, r)),
+            [Some(r), None] if taper || slabs.0 < slabs.1 => Some((0usize, -1.0f32, r)),
+            [None, Some(r)] if taper || slabs.1 < slabs.0 => Some((1, 1.0, r)),
             _ => None,
         };
         if let Some((e, s, r)) = one {

@@ -349,4 +349,37 @@ mod tests {
             assert!(kept <= SLANT_BUDGET as u64 / 2, "{p}: {c} {r}");
         }
     }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// Random images, masks, axes and starts: never a panic, and a fit
+        /// stays within the search's reach of its best start (±8 + 1.5 + ¼
+        /// px) with a finite cost.
+        #[test]
+        fn fit_never_panics_and_stays_near_its_starts(
+            seed in 0u32..1000,
+            w in 8usize..64,
+            h in 4usize..32,
+            runs in proptest::collection::vec((0u16..40, 0u16..80, 0u16..20), 0..20),
+            axis in (-50.0f32..100.0, -50.0f32..50.0, -1.0f32..1.0, -60.0f32..0.0, 0.0f32..60.0),
+            starts in proptest::collection::vec((-20.0f32..40.0, -20.0f32..40.0), 0..4),
+        ) {
+            let mut st = seed.wrapping_mul(2_654_435_761).wrapping_add(1);
+            let mut px = || { st = st.wrapping_mul(1_664_525).wrapping_add(1_013_904_223); (st >> 24) as u8 };
+            let l: Vec<u8> = (0..w * h).map(|_| px()).collect();
+            let r: Vec<u8> = (0..w * h).map(|_| px()).collect();
+            let lv = ImageView::packed(&l, w, h).unwrap();
+            let rv = ImageView::packed(&r, w, h).unwrap();
+            let mut rs: Vec<Run> = runs.iter().map(|&(y, x0, n)| Run { y, x0, x1: x0.saturating_add(n) }).collect();
+            rs.sort_by_key(|r| (r.y, r.x0));
+            let (ang, n) = (axis.2 * 3.2, 1.0f32);
+            let ax = Axis { cx: axis.0, cy: axis.1, ux: libm::cosf(ang) * n, uy: libm::sinf(ang) * n, t0: axis.3, t1: axis.4 };
+            let mut ops = 0;
+            if let Some(f) = fit_slant(&lv, &rv, &rs, 4, &ax, &starts, &mut ops) {
+                proptest::prop_assert!(f.cost.is_finite() && f.cost >= 0.0);
+                let near = starts.iter().any(|s| (f.d0 - s.0).abs() <= 9.75 && (f.d1 - s.1).abs() <= 9.75);
+                proptest::prop_assert!(near, "{:?} from {:?}", f, starts);
+            }
+        }
+    }
 }

@@ -1037,11 +1037,11 @@ pub fn length(
         }
         // only at the tail: the end whose last tenth holds fewer pixels
         match reach {
-            [Some(q), None] if slab0 < slab1 => {
+            [Some(q), None] if !cfg.tail_by_taper || slab0 < slab1 => {
                 ts[0] -= q;
                 comp[0] = true;
             }
-            [None, Some(q)] if slab1 < slab0 => {
+            [None, Some(q)] if !cfg.tail_by_taper || slab1 < slab0 => {
                 ts[1] += q;
                 comp[1] = true;
             }
