@@ -187,7 +187,16 @@ fn benches(c: &mut Criterion) {
     let lcfg = PipelineConfig::new(params, geometry(), W as u32, H as u32);
     let mut every = lcfg;
     every.length.probe_gate = false;
-    for (name, lcfg) in [("length_stage", lcfg), ("length_stage_every_end", every)] {
+    // `length_stage_block_line`: without session 30's slanted fit and fin
+    // profile (the block line alone, as before)
+    let mut block_line = lcfg;
+    block_line.length.slant_fit = false;
+    block_line.length.fin_profile = false;
+    for (name, lcfg) in [
+        ("length_stage", lcfg),
+        ("length_stage_every_end", every),
+        ("length_stage_block_line", block_line),
+    ] {
         g.bench_function(name, |b| {
             b.iter(|| {
                 let mut total = 0.0f32;
