@@ -141,35 +141,48 @@ pub fn fin_reach(
     // the side segments clear a fan as tall as the body (h_o ≈ 3J)
     let out = (2 * half + 2).max(half + 2);
     let mut prof = [0.0f32; MAX_PROFILE];
+    // the profile is taken lazily (a whole tail or a head stops it after a
+    // few samples); `valid` samples taken, `open` while more may follow
     let mut valid = 0usize;
-    for (k, slot) in prof.iter_mut().enumerate().take(len) {
-        let kk = (k + 1) as f32;
-        match contrast_at(img, p, kk, disparity(kk), out) {
-            Some(v) => *slot = v,
-            None => break,
+    let mut open = true;
+    let take = |upto: usize, prof: &mut [f32; MAX_PROFILE], valid: &mut usize, open: &mut bool| {
+        while *open && *valid < upto.min(len) {
+            let kk = (*valid + 1) as f32;
+            match (
+                contrast_at(img, p, kk, disparity(kk), out),
+                prof.get_mut(*valid),
+            ) {
+                (Some(v), Some(slot)) => {
+                    *slot = v;
+                    *valid += 1;
+                }
+                _ => *open = false,
+            }
         }
-        valid = k + 1;
-    }
+        if *valid >= len {
+            *open = false;
+        }
+    };
+    take(8, &mut prof, &mut valid, &mut open);
     if valid < 8 {
         return None;
     }
-    let prof = prof.get(..valid)?;
     // noise of a 5-sample mean of (centre − mean of the sides)
     let nc = (2 * half + 1) as f32;
     let level =
         noise_k * noise * libm::sqrtf(1.0 / nc + 0.5 / (half + 1) as f32) / libm::sqrtf(5.0);
-    let smooth = |k: usize| -> Option<f32> {
-        let win = prof.get(k.saturating_sub(2)..(k + 3).min(valid))?;
-        Some(win.iter().sum::<f32>() / win.len() as f32)
-    };
     let start = prof.get(..4)?.iter().sum::<f32>() / 4.0;
     if !(start >= level && start <= 0.5 * body_contrast) {
         return None;
     }
-    for k in 0..valid {
-        if smooth(k)? < level {
+    let mut k = 0usize;
+    while k < valid {
+        take(k + 3, &mut prof, &mut valid, &mut open);
+        let win = prof.get(k.saturating_sub(2)..(k + 3).min(valid))?;
+        if win.iter().sum::<f32>() / (win.len() as f32) < level {
             return Some(k as f32);
         }
+        k += 1;
     }
     Some(valid as f32)
 }
