@@ -78,7 +78,8 @@ fn cost(
 /// The fitted end disparities `(d0, d1)` of `obj` (template widened by `m`)
 /// from the starting hypotheses `starts`, as the core's `slant::fit_slant`:
 /// the best start, then grids of ±4 steps of 2, ±3 of ½, ±2 of ⅛ around the
-/// best so far, the first of equal costs kept.
+/// best so far, the first of equal costs kept; then the vertex of a
+/// parabola through the best and its ±⅛ neighbours in each end's disparity.
 pub fn fit(
     l: &Gray,
     r: &Gray,
@@ -114,5 +115,17 @@ pub fn fit(
             }
         }
     }
-    best.map(|b| b.0)
+    // the sub-step parabola through the best and its ±⅛ neighbours
+    let ((c0, c1), cb) = best?;
+    let h = 0.125;
+    let at = |d: (f64, f64)| cost(l, r, &tmpl, step, ax, d);
+    let vertex = |m: Option<f64>, p: Option<f64>| match (m, p) {
+        (Some(m), Some(p)) if m - 2.0 * cb + p > 1e-9 => {
+            (0.5 * h * (m - p) / (m - 2.0 * cb + p)).clamp(-h, h)
+        }
+        _ => 0.0,
+    };
+    let v0 = vertex(at((c0 - h, c1)), at((c0 + h, c1)));
+    let v1 = vertex(at((c0, c1 - h)), at((c0, c1 + h)));
+    Some((c0 + v0, c1 + v1))
 }
