@@ -18,11 +18,9 @@
 //!   pixels.
 //! - Cost of `(d₀, d₁)`: the zero-mean SAD per pixel between the template
 //!   and the right image sampled at `x − d(t)` by linear interpolation on a
-//!   1/16-pixel grid; along a row that position is affine in `x`, so it is
-//!   set up per row (in `f64`) and stepped in 16.16 fixed point (integers
-//!   per sample, so the device and the host's reference compute the same
-//!   figures); `None` when fewer than 90 % of the template's pixels have a
-//!   right sample inside the image.
+//!   1/16-pixel grid (integers per sample, so the device and the host's
+//!   reference compute the same figures); `None` when fewer than 90 % of
+//!   the template's pixels have a right sample inside the image.
 //! - Search: the best of the caller's starting hypotheses (the block line,
 //!   the mask ends' chord, the flat `d_o`), then a grid of ±8 px in steps of
 //!   2 around it, ±1.5 in steps of ½, ±¼ in steps of ⅛, then the vertex of
@@ -50,11 +48,6 @@ const MIN_COMPARED: f32 = 0.9;
 
 /// Sub-pixel grid of the right image's interpolation.
 const SUB: i32 = 16;
-
-/// Fractional bits of the per-row fixed-point sample position.
-const FIX_BITS: u32 = 16;
-/// `2^FIX_BITS`.
-const FIX: i64 = 1 << FIX_BITS;
 
 /// The axis the disparity varies along: centre, unit direction, and the
 /// two end positions `t₀ < t₁` the end disparities refer to.
@@ -135,52 +128,42 @@ pub fn slant_cost(
     let mut diffs = [0i16; SLANT_BUDGET];
     let (mut n, mut total) = (0usize, 0usize);
     let mut sum: i64 = 0;
-    let q_max = (w.saturating_sub(1) as i64) * SUB as i64;
     'rows: for s in template(runs, m, w).filter(|s| s.y % rs == 0) {
         let y = s.y as usize;
-        // along a row the right sample 16·(x − d(t(x))) is affine in x:
-        // q(x) = a + b·x, taken in 16.16 fixed point (integers per sample)
-        let (slope, d0) = (slope as f64, d0 as f64);
-        let (ux, uy) = (axis.ux as f64, axis.uy as f64);
-        let rest = (s.y as f64 - axis.cy as f64) * uy - axis.cx as f64 * ux - axis.t0 as f64;
-        let a = -(SUB as f64) * (d0 + slope * rest);
-        let b = SUB as f64 * (1.0 - slope * ux);
-        let rows = (
+        let (Some(lrow), Some(rrow)) = (
             left.row(y).get(..w as usize),
             right.row(y).get(..w as usize),
-        );
-        let ok = a.is_finite() && b.is_finite() && a.abs() < 1.0e9 && b.abs() < 1.0e6;
+        ) else {
+            continue;
+        };
         let first = s.x0.div_ceil(cs) * cs;
-        let (a_fix, b_fix) = (
-            libm::round(a * FIX as f64) as i64,
-            libm::round(b * FIX as f64) as i64,
-        );
-        for x in (first..s.x1).step_by(cs as usize) {
+        let mut x = first;
+        while x < s.x1 {
             if total >= SLANT_BUDGET {
                 break 'rows;
             }
             total += 1;
-            let (true, (Some(lrow), Some(rrow))) = (ok, rows) else {
-                continue;
-            };
-            // right sample at x − d on the 1/16-pixel grid, rounded half up
-            let q = (a_fix + b_fix * x as i64 + FIX / 2) >> FIX_BITS;
-            if q < 0 || q >= q_max {
-                continue;
+            let t = (x as f32 - axis.cx) * axis.ux + (s.y as f32 - axis.cy) * axis.uy;
+            let d = d0 + slope * (t - axis.t0);
+            // right sample at x − d on the 1/16-pixel grid
+            let q = libm::roundf((x as f32 - d) * SUB as f32);
+            if q.is_finite() && q >= 0.0 && q < ((w - 1) as i32 * SUB) as f32 {
+                let q = q as i32;
+                let (i, f) = ((q / SUB) as usize, q % SUB);
+                if let (Some(&a), Some(&r0), Some(&r1), Some(slot)) = (
+                    lrow.get(x as usize),
+                    rrow.get(i),
+                    rrow.get(i + 1),
+                    diffs.get_mut(n),
+                ) {
+                    let r = r0 as i32 * (SUB - f) + r1 as i32 * f;
+                    let v = a as i32 * SUB - r;
+                    *slot = v as i16;
+                    sum += v as i64;
+                    n += 1;
+                }
             }
-            let (i, f) = ((q / SUB as i64) as usize, (q % SUB as i64) as i32);
-            if let (Some(&l), Some(&r0), Some(&r1), Some(slot)) = (
-                lrow.get(x as usize),
-                rrow.get(i),
-                rrow.get(i + 1),
-                diffs.get_mut(n),
-            ) {
-                let r = r0 as i32 * (SUB - f) + r1 as i32 * f;
-                let v = l as i32 * SUB - r;
-                *slot = v as i16;
-                sum += v as i64;
-                n += 1;
-            }
+            x += cs;
         }
     }
     *ops = ops.saturating_add(total as u64);

@@ -3,9 +3,8 @@
 //! template as a list of pixels, the cost from the list of differences.
 //!
 //! The right image is sampled on the same 1/16-pixel grid as the core
-//! (linear interpolation in integers, the position in the core's 16.16
-//! fixed point per row), so the costs agree exactly wherever the sample
-//! positions round alike; the search visits the same grids.
+//! (linear interpolation in integers), so the costs agree exactly wherever
+//! the sample positions round alike; the search visits the same grids.
 
 use super::epipolar::template;
 use super::stereo::{Gray, RefObject};
@@ -49,19 +48,12 @@ fn cost(
         .collect();
     let mut diffs = Vec::new();
     for &(x, y) in &lattice {
-        // the core's per-row fixed point: 16·(x − d) = a + b·x in 16.16
-        let rest = (y as f64 - ax.c.1) * ax.u.1 - ax.c.0 * ax.u.0 - ax.t.0;
-        let a = -16.0 * (d.0 + slope * rest);
-        let b = 16.0 * (1.0 - slope * ax.u.0);
-        if !(a.is_finite() && b.is_finite() && a.abs() < 1.0e9 && b.abs() < 1.0e6) {
+        let t = (x as f64 - ax.c.0) * ax.u.0 + (y as f64 - ax.c.1) * ax.u.1;
+        let q = ((x as f64 - (d.0 + slope * (t - ax.t.0))) * 16.0).round();
+        if !(q >= 0.0 && q < ((w - 1) * 16) as f64) {
             continue;
         }
-        let (a_fix, b_fix) = ((a * 65536.0).round() as i64, (b * 65536.0).round() as i64);
-        let q = (a_fix + b_fix * x + 32768) >> 16;
-        if !(q >= 0 && q < (w - 1) * 16) {
-            continue;
-        }
-        let (i, f) = (q / 16, q % 16);
+        let (i, f) = (q as i64 / 16, q as i64 % 16);
         let (Some(a), Some(r0), Some(r1)) = (l.at(x, y), r.at(i, y), r.at(i + 1, y)) else {
             continue;
         };
