@@ -146,9 +146,12 @@ pub fn slant_cost(
             let t = (x as f32 - axis.cx) * axis.ux + (s.y as f32 - axis.cy) * axis.uy;
             let d = d0 + slope * (t - axis.t0);
             // right sample at x − d on the 1/16-pixel grid
-            let q = libm::roundf((x as f32 - d) * SUB as f32);
-            if q.is_finite() && q >= 0.0 && q < ((w - 1) as i32 * SUB) as f32 {
-                let q = q as i32;
+            // rounded half away from zero, as `roundf`, which for the
+            // non-negative positions kept is ⌊v + ½⌋ (exact in f32 below
+            // 2²²): a cast, not a libm call per sample
+            let v = (x as f32 - d) * SUB as f32;
+            if v > -0.5 && v < ((w - 1) as i32 * SUB) as f32 - 0.5 {
+                let q = (v + 0.5) as i32;
                 let (i, f) = ((q / SUB) as usize, q % SUB);
                 if let (Some(&a), Some(&r0), Some(&r1), Some(slot)) = (
                     lrow.get(x as usize),
