@@ -584,7 +584,12 @@ pub fn measure_length<const N: usize, const R: usize, const B: usize>(
     let bg = background_level(left_img, lo.bbox, (h_o * 0.5) as u32);
     let rh_o = (2.0 * ro.obb.half_h).clamp(2.0, 1024.0);
     let rbg = background_level(right_img, ro.bbox, (rh_o * 0.5) as u32);
-    let slabs = crate::fin::end_slabs(lruns, (cx, cy), (ux, uy), (t_lo, t_hi), 0.1);
+    // the taper rule's mask slabs, only when it decides anything
+    let slabs = if params.tail_compensation && cfg.tail_by_taper {
+        crate::fin::end_slabs(lruns, (cx, cy), (ux, uy), (t_lo, t_hi), 0.1)
+    } else {
+        (0, 0)
+    };
     for (e, s) in [(0usize, -1.0f32), (1, 1.0)] {
         let t = ts[e];
         let end = (cx + t * ux, cy + t * uy);

@@ -5,7 +5,7 @@
 
 mod stereo_scene;
 
-use fishtrack_core::length::{measure_length, LengthConfig};
+use fishtrack_core::length::{measure_length, FishLength, LengthConfig};
 use fishtrack_core::stereo::{pair_objects, PairingLimits};
 use fishtrack_core::{ImageView, Params};
 use stereo_scene::*;
@@ -91,10 +91,16 @@ enum Seg {
     BothCropped,
 }
 
-fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool, noise: f64) -> (f64, bool) {
-    let mut sc = Scene::new(1024, 640);
-    sc.noise = noise;
-    let r = render(&sc, &[fish]);
+/// Renders `fish` alone in `sc`, segments it as `seg` says, pairs it (one
+/// pair) and measures its length with `params` and `cfg`.
+fn measure_fish(
+    sc: &Scene,
+    fish: Fish,
+    seg: Seg,
+    params: &Params,
+    cfg: &LengthConfig,
+) -> FishLength {
+    let r = render(sc, &[fish]);
     let (w, h) = (sc.w, sc.h);
     let (lmask, rmask) = match seg {
         Seg::Full => (&r.masks[0][1], &r.masks[0][3]),
@@ -108,6 +114,13 @@ fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool, noise: f64) -
     let geom = sc.geometry();
     let pairs = pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
     assert_eq!(pairs.pairs.len(), 1, "{fish:?} {seg:?}");
+    measure_length::<N, R, 1024>(&lv, &rv, &left, &right, &pairs.pairs[0], &geom, params, cfg)
+        .unwrap()
+}
+
+fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool, noise: f64) -> (f64, bool) {
+    let mut sc = Scene::new(1024, 640);
+    sc.noise = noise;
     let params = Params {
         tail_compensation: comp,
         ..Params::default()
@@ -120,22 +133,14 @@ fn length_error(fish: Fish, seg: Seg, comp: bool, every_end: bool, noise: f64) -
         tail_by_taper: false,
         ..LengthConfig::default()
     };
-    let l = measure_length::<N, R, 1024>(
-        &lv,
-        &rv,
-        &left,
-        &right,
-        &pairs.pairs[0],
-        &geom,
-        &params,
-        &cfg,
-    )
-    .unwrap();
+    let l = measure_fish(&sc, fish, seg, &params, &cfg);
     let truth = fish.length();
     if std::env::var("STEREO_DEBUG").is_ok() {
         let (hx, hy, hd) = sc.project(fish.head);
         let (tx, ty, td) = sc.project(fish.tail);
-        println!("truth head ({hx:.1},{hy:.1},d {hd:.2}) tail ({tx:.1},{ty:.1},d {td:.2}); pair {:?}\n  got {l:?}", pairs.pairs[0]);
+        println!(
+            "truth head ({hx:.1},{hy:.1},d {hd:.2}) tail ({tx:.1},{ty:.1},d {td:.2})\n  got {l:?}"
+        );
     }
     let err = (l.length_mm as f64 - truth) / truth * 100.0;
     let comped = l.ends.iter().any(|e| e.compensated);
@@ -524,16 +529,6 @@ fn slanted_fit_finds_both_end_disparities() {
             fish.texture = texture;
             let mut sc = Scene::new(1024, 640);
             sc.noise = 4.0;
-            let r = render(&sc, &[fish]);
-            let (w, h) = (sc.w, sc.h);
-            let left = objects(&r.left, &[&r.masks[0][1]], w, h);
-            let right = objects(&r.right, &[&r.masks[0][3]], w, h);
-            let lv = ImageView::packed(&r.left, w, h).unwrap();
-            let rv = ImageView::packed(&r.right, w, h).unwrap();
-            let geom = sc.geometry();
-            let pairs =
-                pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
-            assert_eq!(pairs.pairs.len(), 1);
             let truth_d = |px: (f32, f32)| {
                 let (hx, hy, hd) = sc.project(fish.head);
                 let (tx, ty, td) = sc.project(fish.tail);
@@ -553,17 +548,7 @@ fn slanted_fit_finds_both_end_disparities() {
                     mask_end_tolerance: 0.0,
                     ..LengthConfig::default()
                 };
-                let l = measure_length::<N, R, 1024>(
-                    &lv,
-                    &rv,
-                    &left,
-                    &right,
-                    &pairs.pairs[0],
-                    &geom,
-                    &Params::default(),
-                    &cfg,
-                )
-                .unwrap();
+                let l = measure_fish(&sc, fish, Seg::Full, &Params::default(), &cfg);
                 for e in l.ends {
                     errs[i] = errs[i].max((e.d as f64 - truth_d(e.px)).abs());
                 }
@@ -599,36 +584,12 @@ fn a_fin_too_dim_for_the_snake_is_found_by_its_profile() {
     let measure = |fish: Fish, seg: Seg, fin: bool| -> f64 {
         let mut sc = Scene::new(1024, 640);
         sc.noise = 1.0;
-        let r = render(&sc, &[fish]);
-        let (w, h) = (sc.w, sc.h);
-        let (lm, rm) = match seg {
-            Seg::BothCropped => (&r.masks[0][0], &r.masks[0][2]),
-            _ => (&r.masks[0][1], &r.masks[0][3]),
-        };
-        let left = objects(&r.left, &[lm], w, h);
-        let right = objects(&r.right, &[rm], w, h);
-        let lv = ImageView::packed(&r.left, w, h).unwrap();
-        let rv = ImageView::packed(&r.right, w, h).unwrap();
-        let geom = sc.geometry();
-        let pairs =
-            pair_objects(&lv, &rv, &left, &right, &geom, &PairingLimits::default()).unwrap();
-        assert_eq!(pairs.pairs.len(), 1);
         let cfg = LengthConfig {
             fin_profile: fin,
             tail_by_taper: false,
             ..LengthConfig::default()
         };
-        let l = measure_length::<N, R, 1024>(
-            &lv,
-            &rv,
-            &left,
-            &right,
-            &pairs.pairs[0],
-            &geom,
-            &Params::default(),
-            &cfg,
-        )
-        .unwrap();
+        let l = measure_fish(&sc, fish, seg, &Params::default(), &cfg);
         (l.length_mm as f64 - fish.length()) / fish.length() * 100.0
     };
     let mut restored = 0;
