@@ -78,6 +78,16 @@ pub struct Params {
     /// paper; `crate::segment::local::elongated_enough`); 1 turns the test
     /// off. Default 2.
     pub min_elongation: f32,
+    /// Smallest fill of an output object (beyond the paper;
+    /// `crate::segment::local::solid_enough`): its pixels over the area
+    /// `4π√(λ₁λ₂)` of its equivalent ellipse (1 for a filled ellipse,
+    /// 3/π for a filled rectangle). A fish's mask is a solid body; a
+    /// sparse net of strands — trawl mesh thicker than the line openings of
+    /// Section V.A remove, which Otsu's split then thresholds in the mesh
+    /// bands — fills a fraction of its ellipse. Applied to objects cut by
+    /// the frame too (a fish's visible part is solid). 0 turns the test
+    /// off. Default 0.4.
+    pub min_fill: f32,
     /// Side of the box mean applied to a local region before its
     /// thresholds and masks (eq. (1)–(3)) are computed (beyond the paper;
     /// `crate::segment::local`): averaging `k × k` pixels divides the
@@ -152,7 +162,7 @@ pub struct Params {
     /// two pixels out, against its mean's height above the water. A fish
     /// has a sharp outline (the step is most of its contrast); a glow of
     /// backscatter or strobe haze rises smoothly, so its thresholded
-    /// outline sits on a slope. 0 turns the test off. Default 0.3.
+    /// outline sits on a slope. 0 turns the test off. Default 0.4.
     pub edge_step_ratio: f32,
     /// Edge test: the inner and outer samples lie this many pixels in from
     /// the outline and beyond the first pixel out, so a step spans
@@ -216,6 +226,7 @@ impl Default for Params {
             coarse_scale: 4,
             variance_literal: false,
             min_elongation: 2.0,
+            min_fill: 0.4,
             local_smooth: 1,
             background: true,
             background_radius: 5,
@@ -310,6 +321,7 @@ impl Params {
             ("var_min", self.var_min),
             ("ellipse_scale", self.ellipse_scale),
             ("min_elongation", self.min_elongation),
+            ("min_fill", self.min_fill),
             ("contrast_sigmas", self.contrast_sigmas),
             ("noise_floor", self.noise_floor),
             ("high_floor_sigmas", self.high_floor_sigmas),
@@ -406,6 +418,11 @@ impl Params {
             "min_elongation",
             (0.0..=10.0).contains(&self.min_elongation),
             "0 ≤ min_elongation ≤ 10",
+        )?;
+        range(
+            "min_fill",
+            (0.0..=1.0).contains(&self.min_fill),
+            "0 ≤ min_fill ≤ 1",
         )?;
         let vr = self.v_ref_x * self.v_ref_x + self.v_ref_y * self.v_ref_y;
         range("v_ref_x", vr > 1e-12, "v_ref must not be the zero vector")?;
@@ -507,5 +524,18 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(p.validate().unwrap_err().key(), "min_elongation");
+        for bad in [f32::NAN, -0.1, 1.5] {
+            let p = Params {
+                min_fill: bad,
+                ..Params::default()
+            };
+            assert_eq!(p.validate().unwrap_err().key(), "min_fill");
+        }
+        assert!(Params {
+            min_fill: 0.0,
+            ..Params::default()
+        }
+        .validate()
+        .is_ok());
     }
 }

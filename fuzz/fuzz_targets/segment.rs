@@ -123,6 +123,7 @@ fuzz_target!(|data: &[u8]| {
     p.local_smooth = b.u8v(p.local_smooth);
     p.high_floor_sigmas = b.f32(p.high_floor_sigmas);
     p.edge_step_ratio = b.f32(p.edge_step_ratio);
+    p.min_fill = b.f32(p.min_fill);
 
     // Pixels: the rest of the input, cycled; a flat grey frame when empty.
     let pixels = b.0;

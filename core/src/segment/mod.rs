@@ -180,6 +180,8 @@ pub struct SegmentStats {
     /// Final objects rejected by the elongation test
     /// ([`local::elongated_enough`]).
     pub rejected_shape: u32,
+    /// Objects dropped by the fill test (`local::solid_enough`).
+    pub rejected_fill: u32,
     /// Final objects rejected by the edge test
     /// ([`local::edge_sharp_enough`], `Params::edge_step_ratio`).
     pub rejected_edge: u32,

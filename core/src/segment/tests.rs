@@ -665,3 +665,72 @@ fn edge_test_judges_only_what_it_can() {
     assert!(edge_sharp_enough(&e(-500, 100, 30 * 50, 50), 32, 0.3));
     assert!(edge_sharp_enough(&e(0, 100, 0, 0), 32, 0.3));
 }
+
+/// A frame with a coarse, blurred trawl mesh across its top band (strands
+/// with a triangular profile 2·`half` px wide at the base, at ±35° from the
+/// rows, every `pitch` px): the line openings of Section V.A leave the
+/// strands' wide bases, which the coarse pass then finds (seed 42 of the
+/// synthetic hauls).
+fn draw_coarse_mesh(
+    w: usize,
+    h: usize,
+    fish: &[Fish],
+    half: f32,
+    pitch: f32,
+    seed: u64,
+) -> Vec<u8> {
+    let mut img = draw(w, h, fish, 4.0, false, seed);
+    let (c, s) = (35f32.to_radians().cos(), 35f32.to_radians().sin());
+    for y in 0..h / 5 {
+        for x in 0..w {
+            let (xf, yf) = (x as f32, y as f32);
+            let mut add = 0.0f32;
+            for d in [xf * s - yf * c, xf * s + yf * c] {
+                let r = d.rem_euclid(pitch);
+                let dist = r.min(pitch - r);
+                add = add.max(70.0 * (1.0 - dist / half).max(0.0));
+            }
+            let v = img[y * w + x] as f32 + add;
+            img[y * w + x] = v.clamp(0.0, 255.0) as u8;
+        }
+    }
+    img
+}
+
+#[test]
+#[cfg_attr(miri, ignore)]
+fn a_coarse_mesh_left_by_the_openings_is_no_fish() {
+    let (w, h) = (1024, 1024);
+    let fish = [Fish {
+        cx: 500.0,
+        cy: 600.0,
+        a: 150.0,
+        b: 35.0,
+        angle: 0.3,
+        contrast: 50.0,
+    }];
+    let p = Params::for_frame(w as u32);
+    let mut out: Objects<32, 16384> = Objects::new();
+    let in_band = |o: &Object| (o.bbox.y as usize) < h / 5;
+    for seed in [5, 6, 7] {
+        let img = draw_coarse_mesh(w, h, &fish, 7.0, 70.0, seed);
+        // without the fill test the mesh's band is an object
+        let st = run(&img, w, h, &Params { min_fill: 0.0, ..p }, &mut out);
+        assert!(out.items.iter().any(in_band), "seed {seed}: {st:?}");
+        // with it only the fish is
+        let st = run(&img, w, h, &p, &mut out);
+        assert!(st.rejected_fill >= 1, "seed {seed}: {st:?}");
+        assert_eq!(out.items.len(), 1, "seed {seed}: {:?}", out.items);
+        let o = &out.items[0];
+        assert!(!in_band(o));
+        let (cx, cy) = (
+            o.bbox.x as f32 + o.bbox.w as f32 / 2.0,
+            o.bbox.y as f32 + o.bbox.h as f32 / 2.0,
+        );
+        assert!(
+            (cx - 500.0).abs() < 20.0 && (cy - 600.0).abs() < 20.0,
+            "{:?}",
+            o.bbox
+        );
+    }
+}

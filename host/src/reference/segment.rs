@@ -774,6 +774,14 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 if e > 1.0 && l1 < e * e * l2 && !cut {
                     continue;
                 }
+                // fill test (core: `local::solid_enough`), cut objects too
+                let ellipse = 4.0 * std::f64::consts::PI * (l1 * l2).sqrt();
+                if p.min_fill > 0.0
+                    && ellipse > 0.0
+                    && (comp.len() as f64) < p.min_fill as f64 * ellipse
+                {
+                    continue;
+                }
                 if p.edge_step_ratio > 0.0
                     && !p.split_merged
                     && !edge_sharp(
