@@ -1061,7 +1061,7 @@ mod tests {
         });
         let rect = moments_of(200, 50, |_, _| true);
         let net = |pitch: f32, width: f32| {
-            moments_of(400, 300, move |x, y| {
+            moments_of(240, 200, move |x, y| {
                 (x + y).rem_euclid(pitch) < width || (x - y).rem_euclid(pitch) < width
             })
         };
