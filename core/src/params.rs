@@ -162,7 +162,7 @@ pub struct Params {
     /// two pixels out, against its mean's height above the water. A fish
     /// has a sharp outline (the step is most of its contrast); a glow of
     /// backscatter or strobe haze rises smoothly, so its thresholded
-    /// outline sits on a slope. 0 turns the test off. Default 0.4.
+    /// outline sits on a slope. 0 turns the test off. Default 0.3.
     pub edge_step_ratio: f32,
     /// Edge test: the inner and outer samples lie this many pixels in from
     /// the outline and beyond the first pixel out, so a step spans

@@ -698,6 +698,9 @@ fn draw_coarse_mesh(
 }
 
 #[test]
+// Three 1024² frames, each segmented twice: far too slow to interpret;
+// `solid_bodies_pass_the_fill_test_and_a_net_of_strands_does_not` runs the
+// test itself under Miri.
 #[cfg_attr(miri, ignore)]
 fn a_coarse_mesh_left_by_the_openings_is_no_fish() {
     let (w, h) = (1024, 1024);
