@@ -106,6 +106,12 @@ fn ablations_agree_too() {
             coarse_scale: 1,
             variance_literal: true,
             min_elongation: 1.0,
+            min_fill: 0.0,
+            ..base
+        },
+        // a strict fill test (core and reference refuse alike)
+        Params {
+            min_fill: 0.7,
             ..base
         },
         Params {

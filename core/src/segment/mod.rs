@@ -29,7 +29,7 @@
 //!
 //! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
 //! split_merged: false, dim_level: false, high_floor_sigmas: 0.0,
-//! edge_step_ratio: 0.0, .. }` is the paper's Section III
+//! edge_step_ratio: 0.0, min_fill: 0.0, .. }` is the paper's Section III
 //! exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
