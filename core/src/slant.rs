@@ -383,7 +383,8 @@ mod tests {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
         /// Random images, masks, axes and starts: never a panic, and a fit
         /// stays within the search's reach of its best start (±8 + 1.5 + ¼
-        /// px) with a finite cost.
+        /// px of the grids and ⅛ of the sub-step parabola) with a finite
+        /// cost.
         #[test]
         fn fit_never_panics_and_stays_near_its_starts(
             seed in 0u32..1000,
@@ -406,7 +407,7 @@ mod tests {
             let mut ops = 0;
             if let Some(f) = fit_slant(&lv, &rv, &rs, 4, &ax, &starts, &mut ops) {
                 proptest::prop_assert!(f.cost.is_finite() && f.cost >= 0.0);
-                let near = starts.iter().any(|s| (f.d0 - s.0).abs() <= 9.75 && (f.d1 - s.1).abs() <= 9.75);
+                let near = starts.iter().any(|s| (f.d0 - s.0).abs() <= 9.875 + 1e-3 && (f.d1 - s.1).abs() <= 9.875 + 1e-3);
                 proptest::prop_assert!(near, "{:?} from {:?}", f, starts);
             }
         }
