@@ -165,12 +165,15 @@ pub fn elongated_enough(m: &Moments, e: f32) -> bool {
 /// matched fish on seeds 1–10: 1st percentile 0.45). `f ≤ 0` turns the
 /// test off; a degenerate (one-line) object passes it.
 pub fn solid_enough(m: &Moments, f: f32) -> bool {
-    if f <= 0.0 {
-        return true;
-    }
+    let ellipse = ellipse_area(m);
+    f <= 0.0 || ellipse <= 0.0 || m.area as f32 >= f * ellipse
+}
+
+/// The area `π · 2√λ₁ · 2√λ₂` of the object's equivalent ellipse
+/// ([`solid_enough`]); 0 for a degenerate (one-line or empty) object.
+pub fn ellipse_area(m: &Moments) -> f32 {
     let (_, l1, l2) = m.principal_axes();
-    let ellipse = 4.0 * core::f32::consts::PI * libm::sqrtf(l1 * l2);
-    ellipse <= 0.0 || m.area as f32 >= f * ellipse
+    4.0 * core::f32::consts::PI * libm::sqrtf(l1 * l2)
 }
 
 /// Whether an object reaches within `margin / 4` pixels of the frame
@@ -1047,10 +1050,7 @@ mod tests {
     /// line and `f = 0` pass.
     #[test]
     fn solid_bodies_pass_the_fill_test_and_a_net_of_strands_does_not() {
-        let fill = |m: &Moments| {
-            let (_, l1, l2) = m.principal_axes();
-            m.area as f32 / (4.0 * core::f32::consts::PI * libm::sqrtf(l1 * l2))
-        };
+        let fill = |m: &Moments| m.area as f32 / ellipse_area(m);
         let ellipse = moments_of(300, 120, |x, y| {
             let (u, v) = ((x - 150.0) / 140.0, (y - 60.0) / 40.0);
             u * u + v * v <= 1.0
@@ -1081,6 +1081,7 @@ mod tests {
         assert!(!solid_enough(&thin, 0.4) && !solid_enough(&thick, 0.4));
         assert!(solid_enough(&thin, 0.0), "0 turns the test off");
         let line = moments_of(100, 3, |_, y| y == 1.0);
+        assert_eq!(ellipse_area(&line), 0.0);
         assert!(solid_enough(&line, 0.4));
         assert!(solid_enough(&Moments::EMPTY, 0.4));
     }
