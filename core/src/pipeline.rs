@@ -755,6 +755,7 @@ impl<
         self.stats.measured = self.stats.measured.saturating_add(counts.measured);
 
         let Pipeline {
+            cfg,
             tracker,
             history,
             accs,
@@ -762,7 +763,8 @@ impl<
             observations,
             ..
         } = self;
-        let mut on_track = |e: &TrackEvent<'_>| handle(e, history, accs, stats, sink);
+        let agree = cfg.length.track_agreement;
+        let mut on_track = |e: &TrackEvent<'_>| handle(e, history, accs, stats, agree, sink);
         tracker
             .step(frame, observations, &params, &mut on_track)
             .map_err(PipelineError::Track)?;
@@ -777,13 +779,15 @@ impl<
     /// new haul.
     pub fn finish(&mut self, sink: &mut impl FnMut(&PipelineEvent)) {
         let Pipeline {
+            cfg,
             tracker,
             history,
             accs,
             stats,
             ..
         } = self;
-        let mut on_track = |e: &TrackEvent<'_>| handle(e, history, accs, stats, sink);
+        let agree = cfg.length.track_agreement;
+        let mut on_track = |e: &TrackEvent<'_>| handle(e, history, accs, stats, agree, sink);
         tracker.finish(&mut on_track);
         self.accs.clear();
         for s in self.history.iter_mut() {
@@ -800,6 +804,7 @@ fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
     history: &[FrameSlot<N>; Q],
     accs: &mut heapless::Vec<TrackAcc<F>, T>,
     stats: &mut PipelineStats,
+    agreement: f32,
     sink: &mut impl FnMut(&PipelineEvent),
 ) {
     match *e {
@@ -900,7 +905,7 @@ fn handle<const N: usize, const Q: usize, const T: usize, const F: usize>(
             }
             let (length, range_mm, frames) = match k.and_then(|k| accs.get(k)) {
                 Some(a) => (
-                    a.lengths.estimate(),
+                    a.lengths.estimate_agreeing(agreement),
                     a.ranges.estimate().median_mm,
                     a.frames,
                 ),
@@ -1031,6 +1036,7 @@ mod tests {
                 &history,
                 &mut accs,
                 &mut stats,
+                0.25,
                 &mut |pe: &PipelineEvent| {
                     if let PipelineEvent::TrackFrame {
                         frame, obs, bbox, ..

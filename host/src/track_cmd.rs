@@ -529,6 +529,9 @@ struct Written {
     detections: usize,
     stereo_rows: usize,
     duplicates: usize,
+    /// Counted fish whose measured frames disagree with no majority
+    /// (length withheld, `LengthConfig::track_agreement`).
+    inconsistent: usize,
 }
 
 fn write_outputs(
@@ -543,6 +546,7 @@ fn write_outputs(
     let mut tracks = Vec::new();
     let mut fish = Vec::new();
     let mut duplicates = BTreeSet::new();
+    let mut inconsistent = BTreeSet::new();
     // FISHTRACK_STEREO_DIAG=1: every pair's length measurement in
     // OUT/stereo_diag.csv (analysis aid, not part of the output contract)
     let mut diag = std::env::var_os("FISHTRACK_STEREO_DIAG").map(|_| String::new());
@@ -608,6 +612,9 @@ fn write_outputs(
                     duplicates.insert(track);
                     continue;
                 }
+                if length.inconsistent {
+                    inconsistent.insert(track);
+                }
                 fish.push(FishOut {
                     track_id: track,
                     first_frame,
@@ -668,6 +675,10 @@ fn write_outputs(
         detections: dets.len(),
         stereo_rows: stereo.len(),
         duplicates: duplicates.len(),
+        inconsistent: fish
+            .iter()
+            .filter(|f| inconsistent.contains(&f.track_id))
+            .count(),
         fish,
     })
 }
@@ -813,6 +824,7 @@ fn write_summary(
             "tracks_born": t.targets_born,
             "tracks_closed": t.tracks_closed,
             "duplicate_tracks": w.duplicates,
+            "fish_length_inconsistent": w.inconsistent,
         },
         "dropped": {
             "left_objects": stats.left_objects_dropped,
