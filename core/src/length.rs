@@ -1154,6 +1154,7 @@ mod tests {
     }
 
     proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(if cfg!(miri) { 8 } else { 256 }))]
         /// The agreeing estimate never panics, does not depend on the
         /// frames' order, lies within the frames' range, comes from a group
         /// no wider than `1 + a`, is the plain median when every frame
