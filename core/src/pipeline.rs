@@ -7,7 +7,8 @@
 //!     [─► right view mapped to the left's grey levels, pairing again]
 //!     ─► 3-D length per pair (IV.D) ─► observations ─► matching cost (IV.B)
 //!     + multi-target Viterbi data association (IV.C) ─► tracks ─► fish
-//!        (count + per-track length: median of the wholly-inside frames)
+//!        (count + per-track length: median of the wholly-inside frames that
+//!         agree, `LengthConfig::track_agreement`)
 //! ```
 //!
 //! Data flows one way; [`Pipeline::process_frame`] runs every stage on one
@@ -249,7 +250,9 @@ pub enum PipelineEvent {
         frames: u32,
         /// Frames with an observation.
         hits: u32,
-        /// Length estimate over the wholly-inside measured frames.
+        /// Length estimate over the wholly-inside measured frames that
+        /// agree ([`LengthAccumulator::estimate_agreeing`] with
+        /// `LengthConfig::track_agreement`).
         length: LengthEstimate,
         /// Median range (distance of the 3-D centroid from the left camera), mm.
         range_mm: Option<f32>,
