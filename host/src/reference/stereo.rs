@@ -193,6 +193,9 @@ pub struct Limits {
     pub search_max_ratio: f64,
     /// Epipolar search: best cost at most this share of the runner-up.
     pub search_max_runner_up: f64,
+    /// Whole disparities scanned on each side of the chosen d_o on the
+    /// widened mask (core: `PairingLimits::d_o_scan`, `stereo::scan_d_o`).
+    pub d_o_scan: i64,
 }
 
 impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
@@ -208,6 +211,7 @@ impl From<&fishtrack_core::stereo::PairingLimits> for Limits {
             masked_d_o: l.masked_d_o,
             search_max_ratio: l.search_max_ratio as f64,
             search_max_runner_up: l.search_max_runner_up as f64,
+            d_o_scan: l.d_o_scan as i64,
         }
     }
 }
@@ -312,6 +316,7 @@ fn match_boxes(
     dhi: f64,
     zero_mean: bool,
     masked: Option<(&[(i64, i64)], usize)>,
+    scan: i64,
 ) -> Option<(f64, f64)> {
     let y0 = lb.1.max(rb.1);
     let y1 = (lb.1 + lb.3).min(rb.1 + rb.3);
@@ -377,6 +382,26 @@ fn match_boxes(
             }
         }
     }
+    // then every whole disparity near it on the mask: the candidates are
+    // where blocks and box edges put the fish, the true shift can lie
+    // between them (a view the border cuts)
+    if let (Some((t, area)), true, true) = (masked, zero_mean, scan > 0) {
+        let c0 = best.1.trunc() as i64;
+        let mut found: Option<(f64, i64)> = None;
+        for d in (c0 - scan)..=(c0 + scan) {
+            if (d as f64) < dlo || (d as f64) > dhi {
+                continue;
+            }
+            if let Some(s) = super::epipolar::cost_need(l, r, t, d, (1, 1), (0.5, area)) {
+                if found.is_none_or(|(b, _)| s < b) {
+                    found = Some((s, d));
+                }
+            }
+        }
+        if let Some((_, d)) = found {
+            best.1 = d as f64;
+        }
+    }
     Some((mu, best.1))
 }
 
@@ -436,7 +461,17 @@ pub fn pair(
                 continue;
             }
             let masked = tmpl.as_deref().map(|t| (t, ro.pixels.len()));
-            if let Some((mu, d)) = match_boxes(l, r, lb, rb, dlo, dhi, lim.zero_mean_d_o, masked) {
+            if let Some((mu, d)) = match_boxes(
+                l,
+                r,
+                lb,
+                rb,
+                dlo,
+                dhi,
+                lim.zero_mean_d_o,
+                masked,
+                lim.d_o_scan,
+            ) {
                 if mu <= lim.max_sad {
                     cand[i].push((j, mu, d));
                 }
