@@ -1446,9 +1446,6 @@ mod tests {
         }
     }
 
-    /// [`masked_d_o`] written plainly: the template as a set of pixels
-    /// within `max(4, h_o/4)` columns of a mask pixel on its row, each
-    /// candidate scored from scratch.
     /// The masked zero-mean score of shift `d`, pixel by pixel (as
     /// [`naive_masked_d_o`] scores each candidate).
     fn naive_template_cost(
@@ -1482,6 +1479,9 @@ mod tests {
         Some((acc as f64 / (n as f64 * n as f64)) as f32)
     }
 
+    /// [`masked_d_o`] written plainly: the template as a set of pixels
+    /// within `max(4, h_o/4)` columns of a mask pixel on its row, each
+    /// candidate scored from scratch.
     #[allow(clippy::too_many_arguments)]
     fn naive_masked_d_o(
         left: &ImageView<'_>,
