@@ -705,19 +705,34 @@ pub fn masked_d_o(
     ops: &mut u64,
 ) -> f32 {
     let cands = d_o_candidates(&lo.bbox, &ro.bbox, &m.block_disparity);
-    let margin = ((lo.obb.half_h * 0.5) as u32).max(4);
     choose_d_o(&cands, d_lo, d_hi, m.d_o, &mut |d| {
-        crate::epipolar::template_cost(
-            left,
-            right,
-            runs,
-            margin,
-            d,
-            (1, 1),
-            (0.5, ro.area as u64),
-            ops,
-        )
+        masked_score(left, right, runs, lo, ro, d, ops)
     })
+}
+
+/// The score [`masked_d_o`] and [`scan_d_o`] give shift `d`: zero-mean SAD
+/// per pixel over the left mask widened by `max(4, h_o/4)` columns, when
+/// at least half of `min(template, right object's area)` is compared.
+fn masked_score(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    runs: &[crate::object::Run],
+    lo: &crate::object::Object,
+    ro: &crate::object::Object,
+    d: i32,
+    ops: &mut u64,
+) -> Option<f32> {
+    let margin = ((lo.obb.half_h * 0.5) as u32).max(4);
+    crate::epipolar::template_cost(
+        left,
+        right,
+        runs,
+        margin,
+        d,
+        (1, 1),
+        (0.5, ro.area as u64),
+        ops,
+    )
 }
 
 /// The whole disparity within `radius` of `d0` (truncated) and inside
@@ -740,7 +755,6 @@ pub fn scan_d_o(
     if !d0.is_finite() {
         return d0;
     }
-    let margin = ((lo.obb.half_h * 0.5) as u32).max(4);
     let c = d0 as i32;
     let r = radius as i32;
     let mut best: Option<(f32, i32)> = None;
@@ -748,17 +762,7 @@ pub fn scan_d_o(
         if (d as f32) < d_lo || (d as f32) > d_hi {
             continue;
         }
-        let cost = crate::epipolar::template_cost(
-            left,
-            right,
-            runs,
-            margin,
-            d,
-            (1, 1),
-            (0.5, ro.area as u64),
-            ops,
-        );
-        if let Some(cost) = cost {
+        if let Some(cost) = masked_score(left, right, runs, lo, ro, d, ops) {
             if best.is_none_or(|(b, _)| cost < b) {
                 best = Some((cost, d));
             }
@@ -1493,35 +1497,15 @@ mod tests {
         d_lo: f32,
         d_hi: f32,
     ) -> f32 {
-        let w = left.width() as i64;
-        let margin = ((lo.obb.half_h * 0.5) as i64).max(4);
-        let mut px = std::collections::BTreeSet::new();
-        for r in runs.iter().filter(|r| r.x1 > r.x0) {
-            for x in (r.x0 as i64 - margin).max(0)..(r.x1 as i64 + margin).min(w) {
-                px.insert((r.y as usize, x));
-            }
-        }
         let cands = d_o_candidates(&lo.bbox, &ro.bbox, &m.block_disparity);
         let mut best = (f32::INFINITY, m.d_o);
         for c in cands {
             if c < d_lo || c > d_hi {
                 continue;
             }
-            let d = c as i64;
-            let diffs: Vec<i32> = px
-                .iter()
-                .filter(|&&(_, x)| x - d >= 0 && x - d < w)
-                .map(|&(y, x)| {
-                    left.row(y)[x as usize] as i32 - right.row(y)[(x - d) as usize] as i32
-                })
-                .collect();
-            if diffs.is_empty() || 2 * diffs.len() < px.len().min(ro.area as usize) {
+            let Some(score) = naive_template_cost(left, right, runs, lo, ro, c as i32) else {
                 continue;
-            }
-            let n = diffs.len() as i128;
-            let sum: i128 = diffs.iter().map(|&v| v as i128).sum();
-            let acc: i128 = diffs.iter().map(|&v| (n * v as i128 - sum).abs()).sum();
-            let score = (acc as f64 / (n as f64 * n as f64)) as f32;
+            };
             if score < best.0 {
                 best = (score, c);
             }
