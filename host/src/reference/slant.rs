@@ -2,7 +2,7 @@
 //! Section IV.D.2 beyond the paper's blocks), written for clarity: the
 //! template as a list of pixels, the cost from the list of differences.
 //!
-//! The right image is sampled on the same 1/16-pixel grid as the core
+//! The right image is sampled on the same 1/1024-pixel grid as the core
 //! (linear interpolation in integers), so the costs agree exactly wherever
 //! the sample positions round alike; the search visits the same grids.
 
@@ -11,6 +11,9 @@ use super::stereo::{Gray, RefObject};
 
 /// Most template pixels per hypothesis (core: `slant::SLANT_BUDGET`).
 const BUDGET: usize = 4096;
+
+/// Sub-pixel grid of the right image's interpolation (core: `slant::SUB`).
+const SUB: f64 = 1024.0;
 
 /// Least share of the template's pixels with a right sample in the image.
 const MIN_COMPARED: f64 = 0.9;
@@ -26,7 +29,7 @@ pub struct Axis {
     pub t: (f64, f64),
 }
 
-/// Zero-mean SAD per pixel (1/16 grey levels) of the template pixels on the
+/// Zero-mean SAD per pixel (grey levels) of the template pixels on the
 /// lattice `step` against the right image at the disparity that runs
 /// linearly from `d.0` at `t0` to `d.1` at `t1`.
 fn cost(
@@ -49,22 +52,23 @@ fn cost(
     let mut diffs = Vec::new();
     for &(x, y) in &lattice {
         let t = (x as f64 - ax.c.0) * ax.u.0 + (y as f64 - ax.c.1) * ax.u.1;
-        let q = ((x as f64 - (d.0 + slope * (t - ax.t.0))) * 16.0).round();
-        if !(q >= 0.0 && q < ((w - 1) * 16) as f64) {
+        let q = ((x as f64 - (d.0 + slope * (t - ax.t.0))) * SUB).round();
+        if !(q >= 0.0 && q < (w - 1) as f64 * SUB) {
             continue;
         }
-        let (i, f) = (q as i64 / 16, q as i64 % 16);
+        let s = SUB as i64;
+        let (i, f) = (q as i64 / s, (q as i64 % s) as f64);
         let (Some(a), Some(r0), Some(r1)) = (l.at(x, y), r.at(i, y), r.at(i + 1, y)) else {
             continue;
         };
-        diffs.push(a * 16.0 - (r0 * (16 - f) as f64 + r1 * f as f64));
+        diffs.push(a * SUB - (r0 * (SUB - f) + r1 * f));
     }
     let n = diffs.len();
     if n == 0 || (n as f64) < MIN_COMPARED * lattice.len() as f64 {
         return None;
     }
     let mean = diffs.iter().sum::<f64>() / n as f64;
-    Some(diffs.iter().map(|v| (v - mean).abs()).sum::<f64>() / n as f64)
+    Some(diffs.iter().map(|v| (v - mean).abs()).sum::<f64>() / n as f64 / SUB)
 }
 
 /// The fitted end disparities `(d0, d1)` of `obj` (template widened by `m`)
