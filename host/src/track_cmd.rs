@@ -120,6 +120,25 @@ pub fn crossing_width(raw_width: u32, fps: f64) -> u32 {
         .clamp(1.0, 32_000.0) as u32
 }
 
+/// [`TrackConfig::max_lost`](fishtrack_core::track::TrackConfig::max_lost)
+/// for a haul filmed at `fps`: its default (1 lost frame) was chosen at
+/// 5 fps, where a fish carried through one lost frame moves about a
+/// quarter of the view. At a lower rate one lost frame carries it
+/// `5 / fps` times as far (half the view at 2.5 fps, where a fish
+/// crosses in two frames), so the tracker carries a lost fish through
+/// at most `⌊fps / 5⌋` frames: never farther than at 5 fps (0 at
+/// 2.5 fps, 2 at 10 fps; at most `depth − 2`). A params file's
+/// `[track] max_lost` overrides it.
+pub fn max_lost_for(fps: f64, depth: usize) -> u8 {
+    let n = (fps / FPS).floor();
+    let cap = depth.saturating_sub(2).min(u8::MAX as usize) as f64;
+    if n.is_finite() && n > 0.0 {
+        n.min(cap) as u8
+    } else {
+        0
+    }
+}
+
 /// Parses `--tracker`.
 pub fn parse_tracker(s: &str) -> Result<Association, InputError> {
     match s.to_ascii_lowercase().as_str() {
@@ -169,6 +188,22 @@ pub fn check_alpha(a: f64) -> Result<f64, InputError> {
 #[cfg(test)]
 mod fps_tests {
     use super::*;
+
+    #[test]
+    fn max_lost_follows_the_frame_rate() {
+        let d = fishtrack_core::track::DefaultTracker::DEPTH;
+        // the tracker's own default at the paper's rate
+        assert_eq!(
+            max_lost_for(FPS, d),
+            fishtrack_core::track::TrackConfig::for_frame(2048, 2048).max_lost
+        );
+        assert_eq!(max_lost_for(2.5, d), 0);
+        assert_eq!(max_lost_for(4.99, d), 0);
+        assert_eq!(max_lost_for(10.0, d), 2);
+        assert_eq!(max_lost_for(1000.0, d), (d - 2) as u8);
+        assert_eq!(max_lost_for(1000.0, 1), 0);
+        assert_eq!(max_lost_for(f64::NAN, d), 0);
+    }
 
     #[test]
     fn crossing_width_follows_the_frame_rate() {
@@ -320,6 +355,7 @@ impl Setup {
         // views' scale, not a canvas's size
         cfg.track.sigma_defaults = fishtrack_core::track::Sigmas::for_frame(self.raw_width);
         cfg.track.crossing_width = crossing_width(self.raw_width, self.fps);
+        cfg.track.max_lost = max_lost_for(self.fps, fishtrack_core::track::DefaultTracker::DEPTH);
         self.track.apply(&mut cfg.track);
         cfg
     }
@@ -849,6 +885,7 @@ fn write_summary(
         "track_overrides": setup.track,
         "fps": setup.fps,
         "crossing_width_px": setup.pipeline_config().track.crossing_width,
+        "max_lost": setup.pipeline_config().track.max_lost,
         "column_offsets": setup.columns.iter().map(|c| serde_json::json!({
             "rms": c.as_ref().map(|c| c.rms),
             "applied": c.as_ref().is_some_and(|c| c.applied.is_some()),

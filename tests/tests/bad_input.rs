@@ -299,6 +299,9 @@ fn frame_rate_flag_is_checked_and_recorded() {
             Some(want),
             "{extra:?}"
         );
+        // a lost fish is carried one frame at 5 fps, none at 2.5 fps
+        let lost = if fps < 5.0 { 0 } else { 1 };
+        assert_eq!(summary["max_lost"].as_u64(), Some(lost), "{extra:?}");
         let viame = std::fs::read_to_string(o.join("detections.viame.csv")).unwrap();
         let meta = viame.lines().nth(1).unwrap();
         assert!(
@@ -306,6 +309,15 @@ fn frame_rate_flag_is_checked_and_recorded() {
             "{meta}"
         );
     }
+    // a params file's max_lost wins over the rate's
+    let (t, h) = (_t, h);
+    let p = t.path().join("lost.toml");
+    std::fs::write(&p, "[track]\nmax_lost = 1\n").unwrap();
+    let (out, o) = track(&h, &["--fps", "2.5", "--params", s(&p)]);
+    assert_ok(&out);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(o.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["max_lost"].as_u64(), Some(1));
 }
 
 #[test]
