@@ -68,6 +68,8 @@ pub struct BenchOptions {
     pub repeats: usize,
     /// Only the first N pairs.
     pub frames: Option<usize>,
+    /// `--rect-alpha` (the default scaling when absent).
+    pub rect_alpha: Option<crate::rectify::Scaling>,
 }
 
 impl Default for BenchOptions {
@@ -75,6 +77,7 @@ impl Default for BenchOptions {
         BenchOptions {
             repeats: 3,
             frames: None,
+            rect_alpha: None,
         }
     }
 }
@@ -270,7 +273,13 @@ impl CoarseBufs {
 
 /// Runs the benchmark on `dir`.
 pub fn bench(dir: &Path, opts: &BenchOptions) -> Result<BenchReport> {
-    let setup = prepare(dir, &TrackOptions::default())?;
+    let setup = prepare(
+        dir,
+        &TrackOptions {
+            rect_alpha: opts.rect_alpha,
+            ..TrackOptions::default()
+        },
+    )?;
     let n = opts
         .frames
         .unwrap_or(usize::MAX)

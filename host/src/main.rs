@@ -67,11 +67,11 @@ enum Command {
         #[arg(long)]
         tracker: Option<String>,
         /// Rectification free scaling (OpenCV stereoRectify alpha; default
-        /// 0.25): 0 keeps only valid pixels, 1 keeps the whole raw views,
-        /// -1 is OpenCV's default scaling, `auto` is 0.25 unless that
-        /// magnifies the raw views, then the least scale that does not,
-        /// `canvas` is 0.25's scale on a frame large enough to keep every
-        /// raw pixel (the views' edges filled with water).
+        /// `canvas`: 0.25's scale on a frame large enough to keep every raw
+        /// pixel, the views' edges filled with water): a number keeps the
+        /// raw frame's size, 0 keeps only valid pixels, 1 the whole raw
+        /// views, -1 is OpenCV's default scaling, `auto` is 0.25 unless that
+        /// magnifies the raw views, then the least scale that does not.
         #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
         rect_alpha: Option<fishtrack::rectify::Scaling>,
         /// The haul's frame rate, frames per second (default 5, the
@@ -95,7 +95,7 @@ enum Command {
     Compare {
         /// Haul directory.
         haul: PathBuf,
-        /// Rectification free scaling, as for `track` (default 0.25).
+        /// Rectification free scaling, as for `track` (default `canvas`).
         #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
         rect_alpha: Option<fishtrack::rectify::Scaling>,
         /// The haul's frame rate, as for `track` (default 5).
@@ -115,6 +115,9 @@ enum Command {
         /// Only the first N frame pairs.
         #[arg(long)]
         frames: Option<usize>,
+        /// Rectification free scaling, as for `track` (default `canvas`).
+        #[arg(long, allow_negative_numbers = true, value_parser = parse_rect_alpha)]
+        rect_alpha: Option<fishtrack::rectify::Scaling>,
     },
     /// Strobe/camera timing bench check over a serial line.
     TimingCheck {
@@ -198,10 +201,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             json,
             repeats,
             frames,
+            rect_alpha,
         } => fishtrack::bench_cmd::run(
             &haul,
             json,
-            &fishtrack::bench_cmd::BenchOptions { repeats, frames },
+            &fishtrack::bench_cmd::BenchOptions {
+                repeats,
+                frames,
+                rect_alpha,
+            },
         ),
         Command::TimingCheck { port, frames } => fishtrack::timing::run(&port, frames),
     }

@@ -160,9 +160,9 @@ pub fn rodrigues_mat_to_vec(m: &Matrix3<f64>) -> Vector3<f64> {
     v * (theta / (2.0 * s))
 }
 
-/// The rectification's default free scaling (OpenCV `alpha`), used by
-/// [`Rectifier::new`] and every command unless `--rect-alpha` says
-/// otherwise. DESIGN.md asks for `alpha = 0` (only valid pixels), which
+/// The rectification's free scaling (OpenCV `alpha`) whose scale the
+/// default [`Scaling::Canvas`] keeps (and `--rect-alpha auto` starts from).
+/// DESIGN.md asks for `alpha = 0` (only valid pixels), which
 /// crops a 5–260 px strip of the raw views away, and with it the fish
 /// entering and leaving there; 0.25 keeps part of that strip at a 3–5 %
 /// smaller focal length and was the only value of 0, 0.25, 0.5, 0.75, 1, −1
@@ -193,11 +193,18 @@ pub enum Scaling {
 }
 
 impl Default for Scaling {
-    /// `Alpha(DEFAULT_ALPHA)`: on seeds 1–16 `NoMagnification` segments
-    /// better but measures 3-D lengths worse (README "Input: a haul
-    /// directory"), and the lengths are what the survey is for.
+    /// `Canvas` (session 33): alpha 0.25's scale on a frame that keeps
+    /// every raw pixel. Measured against `Alpha(0.25)` on a 2048² frame
+    /// (seeds 1–30 / 31–60 pooled): segmentation P / R 0.936 / 0.759 →
+    /// 0.950 / 0.799 and 0.914 / 0.746 → 0.939 / 0.792; per-frame 3-D MAPE
+    /// 3.06 → 2.91 % and 3.09 → 2.90 %; per-fish 3.10 → 2.23 % and 3.61
+    /// → 3.43 %; tracking success 598 → 594 and 588 → 600; and the count
+    /// of the re-rendered hauls (`blur` +28 → +10 %, `gamma` +21 → +7 %,
+    /// `dark` −19 → −11 %). Until session 33 (older tracker and length
+    /// stages) `Alpha(0.25)` measured the lengths better (README "Input:
+    /// a haul directory").
     fn default() -> Self {
-        Scaling::Alpha(DEFAULT_ALPHA)
+        Scaling::Canvas
     }
 }
 
@@ -976,6 +983,9 @@ pub struct WaterFill {
     height: usize,
     /// Pixels (row-major indices) with no raw source.
     invalid: Vec<u32>,
+    /// Each invalid pixel's unit noise sample (a fixed pseudo-random
+    /// pattern, made once: [`WaterFill::unit_noise`]).
+    noise: Vec<f32>,
     /// Valid pixels near the fill, with their cell's slot (the cells that
     /// hold band pixels, numbered densely: one histogram each per frame).
     band: Vec<(u32, u32)>,
@@ -1075,16 +1085,34 @@ impl WaterFill {
                 best.map_or(u32::MAX, |b| slot[b.1 as usize])
             })
             .collect();
+        let noise = invalid.iter().map(|&i| Self::unit_noise(i)).collect();
         WaterFill {
             width: w,
             height: h,
             invalid,
+            noise,
             band,
             slots,
             source_cell,
             cells: cw * ch,
             cells_x: cw,
         }
+    }
+
+    /// Water noise of unit σ for pixel `i`: a fixed pseudo-random pattern
+    /// (xorshift of the index; the sum of 4 uniforms, mean 2, variance 1/3,
+    /// centred and scaled), so the frame's noise and gradient statistics
+    /// see water in the fill.
+    fn unit_noise(i: u32) -> f32 {
+        let mut x = i.wrapping_mul(0x9E37_79B9) ^ 0x85EB_CA6B;
+        let mut g = 0.0f32;
+        for _ in 0..4 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            g += (x & 0xFFFF) as f32 / 65535.0;
+        }
+        (g - 2.0) * 3f32.sqrt()
     }
 
     /// Overwrites the fill of a rectified frame with the water level.
@@ -1131,7 +1159,7 @@ impl WaterFill {
         let (cw, ch) = (self.cells_x, self.cells / self.cells_x.max(1));
         let at = |x: usize, y: usize| level[y.min(ch - 1) * cw + x.min(cw - 1)];
         let half = Self::CELL as f32 / 2.0;
-        for &i in &self.invalid {
+        for (&i, &z) in self.invalid.iter().zip(&self.noise) {
             let (px, py) = (
                 (i as usize % self.width) as f32,
                 (i as usize / self.width) as f32,
@@ -1142,18 +1170,6 @@ impl WaterFill {
             let (ax, ay) = (fx - x0 as f32, fy - y0 as f32);
             let m = (1.0 - ay) * ((1.0 - ax) * at(x0, y0) + ax * at(x0 + 1, y0))
                 + ay * ((1.0 - ax) * at(x0, y0 + 1) + ax * at(x0 + 1, y0 + 1));
-            // water noise of the band's σ (a fixed pseudo-random pattern:
-            // the frame's noise and gradient statistics see water here)
-            let mut x = i.wrapping_mul(0x9E37_79B9) ^ 0x85EB_CA6B;
-            let mut g = 0.0f32;
-            for _ in 0..4 {
-                x ^= x << 13;
-                x ^= x >> 17;
-                x ^= x << 5;
-                g += (x & 0xFFFF) as f32 / 65535.0;
-            }
-            // sum of 4 uniforms: mean 2, variance 1/3
-            let z = (g - 2.0) * 3f32.sqrt();
             buf[i as usize] = (m + s * z).round().clamp(0.0, 255.0) as u8;
         }
     }
@@ -1241,8 +1257,8 @@ pub struct Rectifier {
 
 impl Rectifier {
     /// Computes the rectification with FishTrack's default scaling
-    /// ([`Scaling::default`], `alpha` = [`DEFAULT_ALPHA`]) and both remap
-    /// tables.
+    /// ([`Scaling::default`]: [`DEFAULT_ALPHA`]'s scale on a canvas) and
+    /// both remap tables.
     pub fn new(calib: &StereoCalib) -> Self {
         Self::with_scaling(calib, Scaling::default())
     }
@@ -1355,13 +1371,19 @@ impl Rectifier {
         if left.dimensions() != size || right.dimensions() != size {
             return Err(RemapError::SizeMismatch);
         }
-        let (l, r) = rayon::join(|| self.left_map.apply(left), || self.right_map.apply(right));
-        let (mut l, mut r) = (l?, r?);
-        if let Some(wf) = &self.water {
-            wf[0].apply(&mut l);
-            wf[1].apply(&mut r);
-        }
-        Ok((l, r))
+        // each view remapped and filled on its own thread
+        let view = |map: &FixedMap, img: &GrayImage, k: usize| {
+            let mut out = map.apply(img)?;
+            if let Some(wf) = &self.water {
+                wf[k].apply(&mut out);
+            }
+            Ok::<_, RemapError>(out)
+        };
+        let (l, r) = rayon::join(
+            || view(&self.left_map, left, 0),
+            || view(&self.right_map, right, 1),
+        );
+        Ok((l?, r?))
     }
 }
 
@@ -1452,7 +1474,8 @@ mod tests {
         );
         assert_eq!(no_magnification_alpha(&p, DEFAULT_ALPHA), DEFAULT_ALPHA);
         assert_eq!(no_magnification_alpha(&c, 0.99), 0.99);
-        // the default scaling is the fixed alpha
+        // the default scaling is the canvas at the fixed alpha's scale
+        assert_eq!(Scaling::default(), Scaling::Canvas);
         assert_eq!(Scaling::default().alpha(&c), DEFAULT_ALPHA);
         assert_eq!(Scaling::Alpha(0.5).alpha(&c), 0.5);
     }
