@@ -524,6 +524,12 @@ pub fn stereo_rectify_alpha(c: &StereoCalib, alpha: f64) -> Rectification {
 /// ([`undistort_rectangles`]) and may bulge a little between them.
 pub const CANVAS_MARGIN: f64 = 4.0;
 
+/// Largest canvas side of [`stereo_rectify_canvas`] as a multiple of the
+/// raw side: the synthetic rigs need 1.07–1.23 ×; a calibration whose
+/// views spread further (a wild distortion model, a large rotation) keeps
+/// the raw size instead of allocating frames of many times the pixels.
+pub const CANVAS_MAX_FACTOR: f64 = 2.0;
+
 /// [`stereo_rectify_alpha`]'s rectification at the scale of `alpha`, drawn
 /// on a canvas large enough to hold every raw pixel of both cameras (beyond
 /// OpenCV, which fits the views to the raw size): the principal point
@@ -547,6 +553,17 @@ pub fn stereo_rectify_canvas(c: &StereoCalib, alpha: f64) -> Rectification {
     // (a degenerate calibration gives NaN or huge bounds: keep the raw size)
     let ok = |v: f64| v.is_finite() && v.abs() < 65_535.0;
     if ![x0, y0, x1, y1].into_iter().all(ok) || x1 <= x0 || y1 <= y0 {
+        return r;
+    }
+    if x1 - x0 > CANVAS_MAX_FACTOR * c.width as f64 || y1 - y0 > CANVAS_MAX_FACTOR * c.height as f64
+    {
+        log::warn!(
+            "rectification: a canvas holding every raw pixel would be {} x {} for {} x {} views; keeping the raw size",
+            x1 - x0,
+            y1 - y0,
+            c.width,
+            c.height
+        );
         return r;
     }
     let (w, h) = ((x1 - x0) as u32, (y1 - y0) as u32);
@@ -1614,7 +1631,10 @@ mod tests {
             let rect = Rectifier::with_scaling(&c, Scaling::Canvas);
             assert_eq!(rect.size(), (w, h));
             assert!(rect.view_outlines().is_some());
-            assert!(Rectifier::new(&c).view_outlines().is_none());
+            assert!(Rectifier::new(&c).view_outlines().is_some());
+            assert!(Rectifier::with_alpha(&c, DEFAULT_ALPHA)
+                .view_outlines()
+                .is_none());
             let b = rect.left.raw_box(&fishtrack_core::Roi::new(0, 0, w, h));
             assert!(
                 b[0] >= 0.0
@@ -1624,6 +1644,19 @@ mod tests {
                 "{b:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_canvas_many_times_the_raw_view_keeps_the_raw_size() {
+        // a strong pincushion: the raw corners map far outside the view
+        let mut c = rig();
+        c.d1 = vec![2.5, 4.0, 0.0, 0.0, 0.0];
+        let r = stereo_rectify_canvas(&c, DEFAULT_ALPHA);
+        assert_eq!(r.size, (c.width, c.height));
+        assert!(r.outer.is_none());
+        // the plain rig's canvas is larger than its raw view
+        let (w, _) = stereo_rectify_canvas(&rig(), DEFAULT_ALPHA).size;
+        assert!(w > rig().width && w as f64 <= CANVAS_MAX_FACTOR * rig().width as f64);
     }
 
     #[test]
