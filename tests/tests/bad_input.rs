@@ -341,8 +341,8 @@ fn single_frame_haul_is_valid() {
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(o.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["frames"], 1);
-    // the rectification used: the default alpha, a focal length, and the
-    // valid rectangles inside the frame
+    // the rectification used: the default (the canvas at alpha 0.25's
+    // scale), a focal length, and the valid rectangles inside the frame
     let r = &summary["rectification"];
     assert_eq!(r["alpha"], 0.25);
     assert!(r["focal_px"].as_f64().unwrap() > 0.0);
@@ -364,15 +364,27 @@ fn single_frame_haul_is_valid() {
     let s2: serde_json::Value =
         serde_json::from_slice(&std::fs::read(o2.join("summary.json")).unwrap()).unwrap();
     assert!(s2["rectification"]["alpha"].as_f64().unwrap() >= 0.25);
-    // `--rect-alpha canvas`: frames larger than the raw ones, every box
-    // written in raw pixels inside the raw frame
+    // `--rect-alpha 0.25`: the raw frame's size at the canvas's scale
+    let raw = image::image_dimensions(h.join("left/000001.png")).unwrap();
+    let (out, o4) = track(&h, &["--rect-alpha", "0.25"]);
+    assert_ok(&out);
+    let s4: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(o4.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s4["width"].as_u64(), Some(u64::from(raw.0)));
+    assert_eq!(s4["rectification"]["focal_px"], r["focal_px"]);
+    // `--rect-alpha canvas` (the default): frames larger than the raw
+    // ones, every box written in raw pixels inside the raw frame
     let (out, o3) = track(&h, &["--rect-alpha", "canvas"]);
     assert_ok(&out);
     let s3: serde_json::Value =
         serde_json::from_slice(&std::fs::read(o3.join("summary.json")).unwrap()).unwrap();
-    assert!(s3["width"].as_u64().unwrap() > w, "{}", s3["width"]);
+    assert!(
+        s3["width"].as_u64().unwrap() > u64::from(raw.0),
+        "{}",
+        s3["width"]
+    );
+    assert_eq!(s3["width"].as_u64(), Some(w), "the default is the canvas");
     assert_eq!(s3["rectification"]["focal_px"], r["focal_px"]);
-    let raw = image::image_dimensions(h.join("left/000001.png")).unwrap();
     for f in ["detections.csv", "tracks.csv"] {
         for line in std::fs::read_to_string(o3.join(f)).unwrap().lines() {
             let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
