@@ -143,8 +143,15 @@ fn bench_json_reports_every_key() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|e| panic!("bench --json is not JSON ({e}): {}", text(&out.stdout)));
-    assert_eq!(v["width"], 192);
-    assert_eq!(v["height"], 192);
+    // the rectified frame: the default canvas holds every raw pixel
+    let (fw, fh) = (
+        v["width"].as_u64().unwrap_or(0),
+        v["height"].as_u64().unwrap_or(0),
+    );
+    assert!(
+        (192..=384).contains(&fw) && (192..=384).contains(&fh),
+        "{v}"
+    );
     assert_eq!(v["pairs"], 3);
     assert_eq!(v["repeats"], 2);
     let num = |k: &str| {
@@ -159,8 +166,8 @@ fn bench_json_reports_every_key() {
         "{v}"
     );
     assert_eq!(num("pipeline_state_limit_bytes"), 524_288.0);
-    // the workspace holds at least the two frame buffers of a 192² frame
-    assert!(num("workspace_bytes") >= 2.0 * 192.0 * 192.0, "{v}");
+    // the workspace holds at least the two frame buffers of the frame
+    assert!(num("workspace_bytes") >= 2.0 * (fw * fh) as f64, "{v}");
     // peak RSS covers at least the workspace it allocated
     assert!(num("peak_rss_bytes") >= num("workspace_bytes"), "{v}");
     let stages = v["stage_ms_per_pair"]
@@ -197,6 +204,23 @@ fn bench_json_reports_every_key() {
     assert!(
         core_ms < 100.0 * (part("core_total") + 1.0),
         "{core_ms} vs {v}"
+    );
+
+    // `--rect-alpha 0.25`: the raw frame's size
+    let out = run(&[
+        "bench",
+        h,
+        "--json",
+        "--repeats",
+        "1",
+        "--rect-alpha",
+        "0.25",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (v["width"].as_u64(), v["height"].as_u64()),
+        (Some(192), Some(192))
     );
 
     // a bad haul: exit 2, naming it
