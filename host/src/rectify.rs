@@ -1176,18 +1176,29 @@ impl WaterFill {
         let (cw, ch) = (self.cells_x, self.cells / self.cells_x.max(1));
         let at = |x: usize, y: usize| level[y.min(ch - 1) * cw + x.min(cw - 1)];
         let half = Self::CELL as f32 / 2.0;
+        // (the invalid pixels are in row order: each row's vertical
+        // position once, no division per pixel)
+        let (mut row_start, mut row_end) = (0usize, 0usize);
+        let (mut y0, mut ay) = (0usize, 0.0f32);
         for (&i, &z) in self.invalid.iter().zip(&self.noise) {
-            let (px, py) = (
-                (i as usize % self.width) as f32,
-                (i as usize / self.width) as f32,
-            );
+            let i = i as usize;
+            if i >= row_end || i < row_start {
+                let y = i / self.width;
+                row_start = y * self.width;
+                row_end = row_start + self.width;
+                let fy = ((y as f32 - half) / Self::CELL as f32).max(0.0);
+                y0 = fy as usize;
+                ay = fy - y0 as f32;
+            }
+            let px = (i - row_start) as f32;
             let fx = ((px - half) / Self::CELL as f32).max(0.0);
-            let fy = ((py - half) / Self::CELL as f32).max(0.0);
-            let (x0, y0) = (fx as usize, fy as usize);
-            let (ax, ay) = (fx - x0 as f32, fy - y0 as f32);
+            let x0 = fx as usize;
+            let ax = fx - x0 as f32;
             let m = (1.0 - ay) * ((1.0 - ax) * at(x0, y0) + ax * at(x0 + 1, y0))
                 + ay * ((1.0 - ax) * at(x0, y0 + 1) + ax * at(x0 + 1, y0 + 1));
-            buf[i as usize] = (m + s * z).round().clamp(0.0, 255.0) as u8;
+            if let Some(b) = buf.get_mut(i) {
+                *b = (m + s * z).round().clamp(0.0, 255.0) as u8;
+            }
         }
     }
 }
