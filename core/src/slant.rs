@@ -138,7 +138,7 @@ pub fn slant_cost(
         return None;
     }
     let (k0, f0) = (k0 as i32, d0 - k0);
-    let hi = (w as i32 - 1) * SUB;
+    let hi = (w as i32).saturating_sub(1).saturating_mul(SUB);
     let mut diffs = [0i32; SLANT_BUDGET];
     let (mut n, mut total) = (0usize, 0usize);
     let mut sum: i64 = 0;
@@ -159,19 +159,28 @@ pub fn slant_cost(
             total += 1;
             let t = (x as f32 - axis.cx) * axis.ux + (s.y as f32 - axis.cy) * axis.uy;
             let e = (f0 + slope * (t - axis.t0)) * SUB as f32;
-            // rounded half away from zero, as `roundf` (a cast, not a libm
-            // call per sample); |e| is bounded by the template's reach
-            let e = if e.abs() < (1 << 30) as f32 {
-                if e >= 0.0 {
-                    (e + 0.5) as i32
+            // the position `(x − k₀)·SUB − e` rounded half up, as the
+            // reference's `round` of the whole (non-negative) position:
+            // `(x − k₀)·SUB + ⌊½ − e⌋` (a cast, not a libm call per
+            // sample); |e| is bounded by the template's reach
+            let v = 0.5 - e;
+            if !(v.abs() < (1 << 30) as f32) {
+                x += cs;
+                continue;
+            }
+            let fl = {
+                let i = v as i32;
+                if (i as f32) > v {
+                    i - 1
                 } else {
-                    -((0.5 - e) as i32)
+                    i
                 }
-            } else {
-                i32::MAX
             };
             // right sample at x − d on the 1/SUB-pixel grid
-            let q = (x as i32 - k0).saturating_mul(SUB).saturating_sub(e);
+            let q = (x as i32)
+                .saturating_sub(k0)
+                .saturating_mul(SUB)
+                .saturating_add(fl);
             if (0..hi).contains(&q) {
                 let (i, f) = ((q / SUB) as usize, q % SUB);
                 if let (Some(&a), Some(&r0), Some(&r1), Some(slot)) = (
@@ -441,6 +450,31 @@ mod tests {
         // every right sample outside the image
         assert!(fit_slant(&lv, &lv, &runs, 0, &axis, &[(100.0, 100.0)], &mut ops).is_none());
         assert!(fit_slant(&lv, &lv, &runs, 0, &axis, &[(f32::NAN, 1.0)], &mut ops).is_none());
+    }
+
+    /// A view wider than 2²¹ px: the sample grid's bound saturates rather
+    /// than overflowing (it panicked in debug builds).
+    #[test]
+    fn a_very_wide_view_does_not_overflow() {
+        let w = 2_200_000usize;
+        let l = std::vec![7u8; w];
+        let lv = ImageView::packed(&l, w, 1).unwrap();
+        let axis = Axis {
+            cx: 2_100_010.0,
+            cy: 0.0,
+            ux: 1.0,
+            uy: 0.0,
+            t0: -10.0,
+            t1: 10.0,
+        };
+        let runs = [Run {
+            y: 0,
+            x0: u16::MAX - 20,
+            x1: u16::MAX,
+        }];
+        let mut ops = 0;
+        let _ = slant_cost(&lv, &lv, &runs, 0, (1, 1), &axis, 3.0, 3.5, &mut ops);
+        let _ = fit_slant(&lv, &lv, &runs, 0, &axis, &[(3.0, 3.5)], &mut ops);
     }
 
     #[test]

@@ -32,8 +32,9 @@ fn main() -> Result<()> {
     for hp in hauls {
         let haul = Haul::open(std::path::Path::new(&hp))?;
         let calib = load_calibration(&haul)?;
-        let (w, h) = (calib.width as usize, calib.height as usize);
+        // the default rectification (the canvas): its own frame size
         let rect = Rectifier::new(&calib);
+        let (w, h) = (rect.size().0 as usize, rect.size().1 as usize);
         let mut p = Params::for_frame(calib.width);
         p.variance_rejection = !no_var;
         p.variance_literal = literal;
@@ -44,7 +45,7 @@ fn main() -> Result<()> {
         let mut objs: Box<Objects<64, 16384>> = Box::default();
         for pair in &haul.frames {
             let (left, _) = haul.load_pair(pair, Some((calib.width, calib.height)))?;
-            let rl = rect.left_map.apply(&left)?;
+            let rl = rect.rectify_left(&left)?;
             let view = ImageView::packed(rl.as_raw(), w, h).map_err(|e| anyhow::anyhow!("{e}"))?;
             let mut traces = Vec::new();
             let st = segment_frame_traced(view, &p, &mut ws, &mut objs, &mut |t| traces.push(*t))

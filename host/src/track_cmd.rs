@@ -898,6 +898,7 @@ fn write_summary(
         },
         "rectification": {
             "alpha": setup.rectifier.alpha,
+            "canvas": setup.rectifier.rect.outer.is_some(),
             "focal_px": setup.rectifier.rect.p1[(0, 0)],
             "valid_left": roi_json(&valid[0]),
             "valid_right": roi_json(&valid[1]),
