@@ -164,7 +164,7 @@ pub fn slant_cost(
             // `(x − k₀)·SUB + ⌊½ − e⌋` (a cast, not a libm call per
             // sample); |e| is bounded by the template's reach
             let v = 0.5 - e;
-            if !(v.abs() < (1 << 30) as f32) {
+            if v.is_nan() || v.abs() >= (1 << 30) as f32 {
                 x += cs;
                 continue;
             }
