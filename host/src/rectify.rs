@@ -1176,13 +1176,13 @@ impl WaterFill {
         let (cw, ch) = (self.cells_x, self.cells / self.cells_x.max(1));
         let at = |x: usize, y: usize| level[y.min(ch - 1) * cw + x.min(cw - 1)];
         let half = Self::CELL as f32 / 2.0;
-        // (the invalid pixels are in row order: each row's vertical
+        // (the invalid pixels are in ascending order: each row's vertical
         // position once, no division per pixel)
         let (mut row_start, mut row_end) = (0usize, 0usize);
         let (mut y0, mut ay) = (0usize, 0.0f32);
         for (&i, &z) in self.invalid.iter().zip(&self.noise) {
             let i = i as usize;
-            if i >= row_end || i < row_start {
+            if i >= row_end {
                 let y = i / self.width;
                 row_start = y * self.width;
                 row_end = row_start + self.width;

@@ -795,6 +795,8 @@ fn write_summary(
     total: f64,
     maps: &[(f32, f32)],
 ) -> Result<()> {
+    // the tracker settings the run used (the rate's and the params file's)
+    let track = setup.pipeline_config().track;
     let med = |f: fn(&(f32, f32)) -> f32| {
         (!maps.is_empty()).then(|| {
             crate::stats::median(&mut maps.iter().map(|m| f(m) as f64).collect::<Vec<_>>())
@@ -884,8 +886,8 @@ fn write_summary(
         "params": setup.params,
         "track_overrides": setup.track,
         "fps": setup.fps,
-        "crossing_width_px": setup.pipeline_config().track.crossing_width,
-        "max_lost": setup.pipeline_config().track.max_lost,
+        "crossing_width_px": track.crossing_width,
+        "max_lost": track.max_lost,
         "column_offsets": setup.columns.iter().map(|c| serde_json::json!({
             "rms": c.as_ref().map(|c| c.rms),
             "applied": c.as_ref().is_some_and(|c| c.applied.is_some()),
