@@ -7,7 +7,8 @@ FishTrack stands (measured)": figures over seeds, never one seed).
 Runs `fishtrack track HAULDIR/hSEED --out OUTDIR/hSEED TRACK ARGS` and
 `fishtrack eval --json` for every seed (two at a time), writes every
 seed's eval to OUTDIR/eval_SEED.json and prints the pooled figures:
-tracking success (fish correctly labelled / countable fish), detection
+segmentation precision and recall (detections.csv), tracking success
+(fish correctly labelled / countable fish), detection
 precision and recall after tracking, count error (tracks / fish - 1),
 identity switches, IDF1 and MOTA from the pooled MOT counts, and the
 per-frame stereo and per-fish length MAPE weighted by the fish measured.
@@ -34,7 +35,8 @@ def run(binary, hauldir, outdir, seed, extra):
 def pool(evals):
     s = dict(tp=0, fp=0, fn=0, fish=0, ok=0, tracks=0, count_fish=0, sw=0,
              idtp=0, idfp=0, idfn=0, objects=0, miss=0, mfp=0,
-             f_meas=0, f_able=0, f_err=0.0, p_meas=0, p_able=0, p_err=0.0)
+             f_meas=0, f_able=0, f_err=0.0, p_meas=0, p_able=0, p_err=0.0,
+             stp=0, sfp=0, sfn=0)
     for e in evals:
         t = e["tracking"]
         d, m = t["detection"], t["mot"]
@@ -44,6 +46,8 @@ def pool(evals):
         s["sw"] += m["num_switches"]; s["objects"] += m["num_objects"]
         s["miss"] += m["num_misses"]; s["mfp"] += m["num_false_positives"]
         s["idtp"] += m["idtp"]; s["idfp"] += m["idfp"]; s["idfn"] += m["idfn"]
+        sd = e["segmentation"]["detection"]
+        s["stp"] += sd["tp"]; s["sfp"] += sd["fp"]; s["sfn"] += sd["fn_"]
         fl = e["stereo"]["length"]
         s["f_meas"] += fl["measured"]; s["f_able"] += fl["measurable"]
         s["f_err"] += (fl["mape"] or 0.0) * fl["measured"]
@@ -54,6 +58,8 @@ def pool(evals):
     return {
         "seeds": len(evals),
         "success": div(s["ok"], s["fish"]), "correct": s["ok"], "fish": s["fish"],
+        "seg_precision": div(s["stp"], s["stp"] + s["sfp"]),
+        "seg_recall": div(s["stp"], s["stp"] + s["sfn"]),
         "det_precision": div(s["tp"], s["tp"] + s["fp"]),
         "det_recall": div(s["tp"], s["tp"] + s["fn"]),
         "count_error": div(s["tracks"], s["count_fish"]) - 1.0,
@@ -82,7 +88,8 @@ def main(argv):
     p = pool(evals)
     with open(os.path.join(outdir, "pooled.json"), "w") as f:
         json.dump(p, f, indent=1)
-    print(f"success {p['correct']}/{p['fish']} = {p['success']:.3f}  "
+    print(f"seg P/R {p['seg_precision']:.3f}/{p['seg_recall']:.3f}  "
+          f"success {p['correct']}/{p['fish']} = {p['success']:.3f}  "
           f"det P/R {p['det_precision']:.3f}/{p['det_recall']:.3f}  "
           f"count {p['count_error']:+.1%}  switches {p['switches']}  "
           f"IDF1 {p['idf1']:.3f}  MOTA {p['mota']:.3f}")

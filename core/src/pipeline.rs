@@ -422,6 +422,12 @@ fn view_of(o: &Object) -> CameraView {
         bbox: o.bbox,
         area: o.area,
         hist: o.hist,
+        angle: o.obb.angle,
+        elongation: if o.obb.half_h > 0.0 {
+            o.obb.half_w / o.obb.half_h
+        } else {
+            0.0
+        },
     }
 }
 

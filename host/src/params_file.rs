@@ -95,6 +95,9 @@ pub struct TrackOverrides {
     /// [`TrackConfig::cut_aware_motion`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cut_aware_motion: Option<bool>,
+    /// [`TrackConfig::axis_direction`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axis_direction: Option<bool>,
     /// [`TrackConfig::fold_shared`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fold_shared: Option<bool>,
@@ -124,6 +127,7 @@ impl TrackOverrides {
         set(self.hist_robust, &mut cfg.hist_robust);
         set(self.depth_robust, &mut cfg.depth_robust);
         set(self.cut_aware_motion, &mut cfg.cut_aware_motion);
+        set(self.axis_direction, &mut cfg.axis_direction);
         set(self.fold_shared, &mut cfg.fold_shared);
     }
 }

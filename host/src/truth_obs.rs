@@ -10,7 +10,9 @@
 //! / `right_area` when the fish is visible there; depth = the mean z of the
 //! head and tail points; 16-bin grey histograms from the rendered PNG pixels
 //! inside each box — the pixels at or above the box's mean grey (the lit
-//! body; the segmentation's mask would be tighter). `pair` indexes the
+//! body; the segmentation's mask would be tighter); body axis (for the
+//! newborn direction cue, `TrackConfig::axis_direction`) from the truth's
+//! head and tail points, elongation π L² / 4 A. `pair` indexes the
 //! frame's source list, which maps back to the fish.
 //!
 //! Thinning (2.5 fps from 5 fps) keeps frames 1, 3, 5, … and renumbers them,
@@ -93,6 +95,7 @@ fn view(b: &[f64; 4], area: f64, img: &GrayImage) -> CameraView {
         bbox: r,
         area: area.round().max(1.0) as u32,
         hist: body_hist(img, &r),
+        ..Default::default()
     }
 }
 
@@ -138,13 +141,25 @@ pub fn load(dir: &Path, thin: bool) -> Result<TruthObs, InputError> {
             if at.left_area < area_min {
                 continue;
             }
+            // the body axis from the truth's head and tail (both views:
+            // the rectified rows are shared), elongation of the ellipse of
+            // that length and the left area: π L² / 4 A
+            let axis = |mut v: CameraView| {
+                if let (Some(hd), Some(tl)) = (at.head_px_left, at.tail_px_left) {
+                    let (dx, dy) = (tl[0] - hd[0], tl[1] - hd[1]);
+                    v.angle = dy.atan2(dx) as f32;
+                    v.elongation = (std::f64::consts::FRAC_PI_4 * (dx * dx + dy * dy)
+                        / at.left_area.max(1.0)) as f32;
+                }
+                v
+            };
             let right = at
                 .right_box
                 .filter(|_| at.right_area >= 1.0)
-                .map(|rb| view(&rb, at.right_area, &r));
+                .map(|rb| axis(view(&rb, at.right_area, &r)));
             let z = 0.5 * (at.head_mm[2] + at.tail_mm[2]);
             of.obs.push(Observation {
-                left: view(&lb, at.left_area, &l),
+                left: axis(view(&lb, at.left_area, &l)),
                 right,
                 depth_mm: (z > 0.0).then_some(z as f32),
                 pair: of.source.len() as u16,

@@ -87,7 +87,10 @@ fn hist(rng: &mut Rng, bin: usize, n: f64) -> [u32; 16] {
     h
 }
 
-fn view(cx: f64, cy: f64, len: f64, area: f64, hist: [u32; 16]) -> CameraView {
+/// `axis`: the body's heading, for a view of one whole or cut fish (its
+/// box is len × len/4: elongation 4); `None` for merged objects and
+/// debris.
+fn view(cx: f64, cy: f64, len: f64, area: f64, hist: [u32; 16], axis: Option<f64>) -> CameraView {
     let h = len * 0.25;
     CameraView {
         cx: cx as f32,
@@ -104,6 +107,8 @@ fn view(cx: f64, cy: f64, len: f64, area: f64, hist: [u32; 16]) -> CameraView {
         },
         area: area as u32,
         hist,
+        angle: axis.unwrap_or(0.0) as f32,
+        elongation: if axis.is_some() { 4.0 } else { 0.0 },
     }
 }
 
@@ -173,6 +178,7 @@ fn simulate(seed: u64, n_frames: usize) -> Haul {
             hl: [u32; 16],
             hr: [u32; 16],
             owners: Vec<usize>,
+            axis: Option<f64>,
         }
         let mut dets: Vec<Det> = Vec::new();
         let mut still = Vec::new();
@@ -214,6 +220,7 @@ fn simulate(seed: u64, n_frames: usize) -> Haul {
                         hl: hist(&mut rng, bin, n),
                         hr: hist(&mut rng, bin, n),
                         owners: vec![i],
+                        axis: Some(f.heading),
                     });
                 }
             }
@@ -252,6 +259,7 @@ fn simulate(seed: u64, n_frames: usize) -> Haul {
                         m.hr[b] += d.hr[b];
                     }
                     m.owners.extend(d.owners);
+                    m.axis = None;
                 }
                 None => merged.push(d),
             }
@@ -278,13 +286,14 @@ fn simulate(seed: u64, n_frames: usize) -> Haul {
             let disp = FOCAL * BASELINE / d.z;
             obs_owners.push((
                 Observation {
-                    left: view(d.x, d.y, d.len, d.area, d.hl),
+                    left: view(d.x, d.y, d.len, d.area, d.hl, d.axis),
                     right: Some(view(
                         d.x - disp,
                         d.y,
                         d.len,
                         d.area * rng.range(0.9, 1.1),
                         d.hr,
+                        d.axis,
                     )),
                     depth_mm: Some(d.z as f32),
                     pair: 0,
@@ -301,8 +310,15 @@ fn simulate(seed: u64, n_frames: usize) -> Haul {
             let hr = hist(&mut rng, bin, area / 10.0);
             obs_owners.push((
                 Observation {
-                    left: view(db.0, db.1, db.5, area, hl),
-                    right: Some(view(db.0 - FOCAL * BASELINE / z, db.1, db.5, area, hr)),
+                    left: view(db.0, db.1, db.5, area, hl, None),
+                    right: Some(view(
+                        db.0 - FOCAL * BASELINE / z,
+                        db.1,
+                        db.5,
+                        area,
+                        hr,
+                        None,
+                    )),
                     depth_mm: known.then_some(z as f32),
                     pair: 0,
                 },

@@ -264,6 +264,15 @@ pub struct TrackConfig {
     /// observation lies on another, at least as long track's path is that
     /// fish counted twice and closes as [`CloseReason::Duplicate`].
     pub fold_shared: bool,
+    /// A target's first transition takes its direction cue from the fish's
+    /// body axis (our addition; see [`cost`], "direction reference"): a
+    /// newborn has no velocity, so eq. (7)'s θ is measured against the
+    /// principal axis of its uncut, elongated view ([`MIN_AXIS_ELONGATION`]),
+    /// sign-free (head or tail first). Fish are carried through the view
+    /// along their bodies; the fleet's `v_init` alone says nothing of a
+    /// fish that swims another way. False: no direction cue on a first
+    /// transition.
+    pub axis_direction: bool,
 }
 
 /// Default [`TrackConfig::depth_robust`].
@@ -322,6 +331,7 @@ impl TrackConfig {
             depth_robust: DEPTH_ROBUST,
             cut_aware_motion: true,
             fold_shared: true,
+            axis_direction: true,
         }
     }
 
@@ -577,12 +587,22 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
     let first = !p.vel_known;
     let vel = if first { x.v_init } else { p.vel };
     let depths = (p.depth, c.depth);
-    let v_ref = direction_ref(p);
-    let fl = edge_features(&p.left, vel, &c.left, depths, v_ref, x.z_ref, x.cut_aware);
+    let (v_ref, line) = direction_ref(p, &p.left, &c.left);
+    let fl = edge_features(
+        &p.left,
+        vel,
+        &c.left,
+        depths,
+        v_ref,
+        x.z_ref,
+        x.cut_aware,
+        line,
+    );
     let cl = camera_cost(&fl, &x.sig, first, x.cues, &x.robust);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let fr = edge_features(pr, vel, cr, depths, v_ref, x.z_ref, x.cut_aware);
+            let (v_ref, line) = direction_ref(p, pr, cr);
+            let fr = edge_features(pr, vel, cr, depths, v_ref, x.z_ref, x.cut_aware, line);
             let c_r = camera_cost(&fr, &x.sig, first, x.cues, &x.robust);
             Edge {
                 cost: cl + c_r,
@@ -597,6 +617,10 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
         },
     }
 }
+
+/// Least elongation (`w_o / h_o`) of a view whose body axis gives a
+/// newborn's direction cue.
+pub const MIN_AXIS_ELONGATION: f32 = 2.0;
 
 /// Minimum gain of a pair exchange in the Viterbi selection
 /// ([`greedy::improve_pairs`]); keeps near-ties with greedy's choice.
@@ -617,13 +641,19 @@ pub fn default_v_init(params: &Params, width: u32) -> [f32; 2] {
     [x * s, y * s]
 }
 
-/// v_ref of eq. (7) for edges from `p` (see `cost`): its own velocity when
-/// known, else zero (no direction cue).
-fn direction_ref(p: &NodeState) -> [f32; 2] {
+/// v_ref of eq. (7) for one camera's edge from node `p` (view `pv`) to a
+/// candidate view `cv` (see `cost`), and whether it is a sign-free axis:
+/// the target's own velocity when known; else (its first transition) the
+/// body axis of the node's view, or of the candidate's when the node's
+/// gives none ([`TrackConfig::axis_direction`]); else zero (no direction
+/// cue).
+fn direction_ref(p: &NodeState, pv: &ViewFeat, cv: &ViewFeat) -> ([f32; 2], bool) {
     if p.vel_known {
-        p.vel
+        (p.vel, false)
+    } else if pv.axis != cost::NO_AXIS {
+        (cost::axis_vector(pv.axis), true)
     } else {
-        [0.0, 0.0]
+        (cost::axis_vector(cv.axis), true)
     }
 }
 
@@ -950,6 +980,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
             *t = false;
         }
         let [vl, vr] = self.cfg.outlines();
+        let cfg_axis = self.cfg.axis_direction;
         for (i, o) in observations.iter().enumerate() {
             if i >= N {
                 self.stats.obs_dropped = self.stats.obs_dropped.saturating_add(1);
@@ -981,6 +1012,11 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                     bbox,
                     cut_sides: if sane { sides } else { 0 },
                     cdf: cdf(&v.hist),
+                    axis: if sides == 0 && cfg_axis && v.elongation >= MIN_AXIS_ELONGATION {
+                        cost::axis_degrees(v.angle)
+                    } else {
+                        cost::NO_AXIS
+                    },
                 }
             };
             let _ = self.cands.push(Cand {

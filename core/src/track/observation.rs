@@ -23,6 +23,12 @@ pub struct CameraView {
     /// 16-bin grey-level histogram of the mask (raw counts; normalised by
     /// the matching cost).
     pub hist: [u32; HIST_BINS],
+    /// Angle of the mask's first principal axis from +x, radians (y down;
+    /// the oriented box's, Section III).
+    pub angle: f32,
+    /// Elongation of the oriented box, half length over half height
+    /// (`w_o / h_o`); 0 when unknown.
+    pub elongation: f32,
 }
 
 impl CameraView {

@@ -38,6 +38,7 @@ fn fish(x: f32, y: f32, len: f32, bin: usize, z: f32, pair: u16) -> Observation 
         bbox,
         area,
         hist,
+        ..Default::default()
     };
     let disp = 2000.0 * 300.0 / z;
     let mut right = left;
@@ -335,6 +336,7 @@ fn arb_obs() -> impl Strategy<Value = Observation> {
                 bbox: Roi::new(bx, by, 300, 80),
                 area,
                 hist,
+                ..Default::default()
             };
             let mut right = left;
             right.cx = x + dx;
@@ -532,6 +534,7 @@ fn motion_delta_uses_the_sides_the_border_does_not_cut() {
         bbox: [b.x as f32, b.y as f32, b.right() as f32, b.bottom() as f32],
         cut_sides: cut_sides(&b, &view, 2),
         cdf: None,
+        axis: cost::NO_AXIS,
     };
     // cut at the right border, then whole: the left sides' step in x, the
     // centroids' in y (no side cut along y)
@@ -577,7 +580,7 @@ fn motion_delta_uses_the_sides_the_border_does_not_cut() {
     // exactly, where its centroid step would be 125 px short
     let edge = |aware| {
         let v = [-500.0, 70.0];
-        cost::edge_features(&a, v, &b, (None, None), [-1.0, 0.0], 2000.0, aware)
+        cost::edge_features(&a, v, &b, (None, None), [-1.0, 0.0], 2000.0, aware, false)
     };
     let (f, g) = (edge(true), edge(false));
     assert_eq!(f.d2, 0.0);
@@ -744,4 +747,62 @@ fn a_newborn_lost_on_its_first_step_does_not_block_another_fish() {
             }
         }
     }
+}
+
+/// `o` with the body axis at `angle` (radians) and elongation `e` in both
+/// views, its boxes turned to match a vertical fish when `angle` is near
+/// ±π/2.
+fn with_axis(mut o: Observation, angle: f32, e: f32) -> Observation {
+    for v in core::iter::once(&mut o.left).chain(o.right.as_mut()) {
+        v.angle = angle;
+        v.elongation = e;
+        if libm::fabsf(libm::cosf(angle)) < 0.5 {
+            let (w, h) = (v.bbox.w, v.bbox.h);
+            let (cx, cy) = (v.bbox.x + w / 2, v.bbox.y + h / 2);
+            v.bbox = Roi::new(cx - h / 2, cy - w / 2, h, w);
+        }
+    }
+    o
+}
+
+#[test]
+fn a_newborn_moves_along_its_body_axis() {
+    // A fish swimming down (body vertical), first seen mid-frame, and at
+    // frame 1 two candidates: itself 400 px further along its body, and a
+    // new fish close to where the fleet's default velocity (−476, 0)
+    // projects it but across its body (76° off its axis). Frame 2 carries
+    // both on. With the body axis as the first transition's direction
+    // reference the fish keeps its own continuation; without it
+    // (`axis_direction` false: vicinity alone) it takes the other fish.
+    let v = std::f32::consts::FRAC_PI_2;
+    let h = 0.0;
+    let frames = std::vec![
+        std::vec![with_axis(fish(1000.0, 1000.0, 300.0, 6, 2000.0, 0), v, 4.0)],
+        std::vec![
+            with_axis(fish(1000.0, 1400.0, 300.0, 6, 2000.0, 0), v, 4.0),
+            with_axis(fish(600.0, 1100.0, 300.0, 6, 2000.0, 1), h, 4.0),
+        ],
+        std::vec![
+            with_axis(fish(1000.0, 1800.0, 300.0, 6, 2000.0, 0), v, 4.0),
+            with_axis(fish(200.0, 1200.0, 300.0, 6, 2000.0, 1), h, 4.0),
+        ],
+    ];
+    for (axis, want) in [(true, 0u16), (false, 1)] {
+        let cfg = TrackConfig {
+            axis_direction: axis,
+            ..TrackConfig::for_frame(W, W)
+        };
+        let log = run_cfg(&frames, cfg);
+        let id = log.ids_of(0, 0);
+        assert_eq!(id.len(), 1, "{:?}", log.frames);
+        assert_eq!(log.ids_of(1, want), id, "axis {axis}: {:?}", log.frames);
+        assert_eq!(log.ids_of(2, want), id, "axis {axis}: {:?}", log.frames);
+    }
+    // a view too round for an axis gives no direction: as without the cue
+    let round: std::vec::Vec<std::vec::Vec<Observation>> = frames
+        .iter()
+        .map(|f| f.iter().map(|o| with_axis(*o, o.left.angle, 1.5)).collect())
+        .collect();
+    let log = run_cfg(&round, TrackConfig::for_frame(W, W));
+    assert_eq!(log.ids_of(1, 1), log.ids_of(0, 0), "{:?}", log.frames);
 }

@@ -283,6 +283,7 @@ pub fn view_feat(pos: [f32; 2], area: u32, cdf: Option<Cdf>) -> ViewFeat {
         bbox: [pos[0], pos[1], pos[0], pos[1]],
         cut_sides: 0,
         cdf,
+        axis: super::cost::NO_AXIS,
     }
 }
 

@@ -132,6 +132,10 @@ struct View {
     cut_lo: [bool; 2],
     cut_hi: [bool; 2],
     cdf: Option<[f64; 15]>,
+    /// Unit body axis of an uncut view elongated at least
+    /// `MIN_AXIS_ELONGATION` (`TrackConfig::axis_direction`), its
+    /// direction rounded to whole degrees.
+    axis: Option<[f64; 2]>,
 }
 
 /// Displacement of the fish from view `a` to view `b` (core:
@@ -301,7 +305,7 @@ fn feat(
     vel: [f64; 2],
     c: &View,
     depths: (Option<f64>, Option<f64>),
-    v_ref: [f64; 2],
+    (v_ref, line): ([f64; 2], bool),
     k: &Costs,
 ) -> Feat {
     let norm = |a: f64, z: Option<f64>| match (depths, z) {
@@ -324,7 +328,13 @@ fn feat(
         // Angle between v and v_ref by the cosine formula, eq. (7).
         let cos =
             (v[0] * v_ref[0] + v[1] * v_ref[1]) / (v[0].hypot(v[1]) * v_ref[0].hypot(v_ref[1]));
-        cos.clamp(-1.0, 1.0).acos()
+        let th = cos.clamp(-1.0, 1.0).acos();
+        // a body axis has no sign: the angle to its line
+        if line {
+            th.min(std::f64::consts::PI - th)
+        } else {
+            th
+        }
     };
     let emd = match (&p.cdf, &c.cdf) {
         (Some(a), Some(b)) => a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum(),
@@ -447,13 +457,20 @@ fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
     let first = !p.vel_known;
     let v = if first { k.v_init } else { p.vel };
     let d = (p.depth, c.depth);
-    // Direction reference: the target's own velocity; none in its first frame.
-    let v_ref = if p.vel_known { p.vel } else { [0.0, 0.0] };
-    let fl = feat(&p.left, v, &c.left, d, v_ref, k);
+    // Direction reference: the target's own velocity; in its first frame
+    // the body axis of the node's view, else of the candidate's, else none.
+    let dir = |pv: &View, cv: &View| {
+        if p.vel_known {
+            (p.vel, false)
+        } else {
+            (pv.axis.or(cv.axis).unwrap_or([0.0, 0.0]), true)
+        }
+    };
+    let fl = feat(&p.left, v, &c.left, d, dir(&p.left, &c.left), k);
     let cl = cam_cost(&fl, k, first);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let fr = feat(pr, v, cr, d, v_ref, k);
+            let fr = feat(pr, v, cr, d, dir(pr, cr), k);
             let cr_ = cam_cost(&fr, k, first);
             (cl + cr_, fl, Some(fr))
         }
@@ -599,6 +616,18 @@ pub fn run_traced(
                 cut_lo: lo.map(|c| ok && c),
                 cut_hi: hi.map(|c| ok && c),
                 cdf: cdf(&v.hist),
+                axis: (cfg.axis_direction
+                    && !lo.iter().chain(&hi).any(|&c| c)
+                    && v.elongation >= fishtrack_core::track::MIN_AXIS_ELONGATION
+                    && v.angle.is_finite())
+                .then(|| {
+                    // the line's direction in whole degrees (the core keeps
+                    // one byte per view), 0 to 179
+                    let d = ((v.angle as f64).to_degrees() % 180.0).round();
+                    let d = (if d < 0.0 { d + 180.0 } else { d }) % 180.0;
+                    let r = d.to_radians();
+                    [r.cos(), r.sin()]
+                }),
             }
         };
         let cands: Vec<Cand> = obs
