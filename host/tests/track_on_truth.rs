@@ -60,6 +60,7 @@ fn tweak(cfg: &mut TrackConfig) {
                 "fold" => cfg.fold_shared = on,
                 "depth_robust" => cfg.depth_robust = x.parse().unwrap(),
                 "cut_aware" => cfg.cut_aware_motion = on,
+                "axis" => cfg.axis_direction = on,
                 _ => panic!("FISHTRACK_RULES: unknown rule {k}"),
             }
         }

@@ -34,7 +34,7 @@
 //!   view along their bodies (synthetic hauls: median 10°, 90th percentile
 //!   26° between the body axis and the next displacement), while `v_init`
 //!   is only the fleet's typical step (seeds 1–30 / 31–60: success 594 →
-//!   603 / 600 → 625). Without an axis a first transition has no
+//!   603 / 600 → 624). Without an axis a first transition has no
 //!   direction cue. The paper chooses v_ref
 //!   "according to the motion trend of fish schools or the movement of
 //!   cameras"; a fixed (−1, 0) — or the school's mean motion — penalises
@@ -161,17 +161,22 @@ pub struct ViewFeat {
     pub axis: u8,
 }
 
+/// Largest |angle| [`axis_degrees`] reads, radians (8π; the oriented box
+/// gives (−π/2, π/2]).
+pub const MAX_AXIS_ANGLE: f32 = 8.0 * core::f32::consts::PI;
+
 /// [`ViewFeat::axis`] of a view without a body axis.
 pub const NO_AXIS: u8 = u8::MAX;
 
 /// A body axis at `angle` radians (any sign or turn) as the degree of its
 /// line, 0 to 179 (rounded; an axis has no sign); [`NO_AXIS`] when the
-/// angle is not finite.
+/// angle is not finite or beyond ±[`MAX_AXIS_ANGLE`].
 pub fn axis_degrees(angle: f32) -> u8 {
-    if !angle.is_finite() {
+    // (beyond a few turns an f32 angle has lost its degrees anyway)
+    if angle.is_nan() || libm::fabsf(angle) > MAX_AXIS_ANGLE {
         return NO_AXIS;
     }
-    let d = libm::roundf(angle.to_degrees() % 180.0);
+    let d = libm::roundf(libm::fmodf(angle.to_degrees(), 180.0));
     let d = if d < 0.0 { d + 180.0 } else { d };
     (d as u32 % 180) as u8
 }
@@ -430,6 +435,9 @@ mod tests {
         assert_eq!(axis_degrees(PI - 0.001), 0);
         assert_eq!(axis_degrees(f32::NAN), NO_AXIS);
         assert_eq!(axis_degrees(f32::INFINITY), NO_AXIS);
+        assert_eq!(axis_degrees(1e37), NO_AXIS);
+        assert_eq!(axis_degrees(-30.0), NO_AXIS);
+        assert_eq!(axis_degrees(-25.0), axis_degrees(-25.0 + 8.0 * PI));
         assert_eq!(axis_vector(NO_AXIS), [0.0; 2]);
         let v = axis_vector(axis_degrees(1.0));
         assert!((v[0] - 1f32.cos()).abs() < 0.01 && (v[1] - 1f32.sin()).abs() < 0.01);

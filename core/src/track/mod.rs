@@ -268,7 +268,11 @@ pub struct TrackConfig {
     /// body axis (our addition; see [`cost`], "direction reference"): a
     /// newborn has no velocity, so eq. (7)'s θ is measured against the
     /// principal axis of its uncut, elongated view ([`MIN_AXIS_ELONGATION`]),
-    /// sign-free (head or tail first). Fish are carried through the view
+    /// or of the candidate's when its own gives none, sign-free (head or
+    /// tail first); a newborn lost on its first transition measures the
+    /// displacement from where it was seen, not from its `v_init` guess.
+    /// First transitions then add their θ² to σ_m's samples (they added 0
+    /// before). Fish are carried through the view
     /// along their bodies; the fleet's `v_init` alone says nothing of a
     /// fish that swims another way. False: no direction cue on a first
     /// transition.
@@ -598,11 +602,14 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
         x.cut_aware,
         line,
     );
+    let mut fl = fl;
+    lost_newborn_direction(p, &p.left, &c.left, &mut fl, x);
     let cl = camera_cost(&fl, &x.sig, first, x.cues, &x.robust);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
             let (v_ref, line) = direction_ref(p, pr, cr);
-            let fr = edge_features(pr, vel, cr, depths, v_ref, x.z_ref, x.cut_aware, line);
+            let mut fr = edge_features(pr, vel, cr, depths, v_ref, x.z_ref, x.cut_aware, line);
+            lost_newborn_direction(p, pr, cr, &mut fr, x);
             let c_r = camera_cost(&fr, &x.sig, first, x.cues, &x.robust);
             Edge {
                 cost: cl + c_r,
@@ -621,6 +628,37 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
 /// Least elongation (`w_o / h_o`) of a view whose body axis gives a
 /// newborn's direction cue.
 pub const MIN_AXIS_ELONGATION: f32 = 2.0;
+
+/// The direction term of a newborn lost on its first transition (our
+/// addition, with [`TrackConfig::axis_direction`]): its predicted node
+/// sits at `v_init`'s guess, so the displacement whose angle to the body
+/// axis counts is the one from where the fish was seen, `lost` frames of
+/// `v_init` back, not from the guess.
+fn lost_newborn_direction(
+    p: &NodeState,
+    pv: &ViewFeat,
+    cv: &ViewFeat,
+    f: &mut EdgeFeatures,
+    x: &Ctx,
+) {
+    if p.vel_known || p.lost == 0 {
+        return;
+    }
+    let ax = if pv.axis != cost::NO_AXIS {
+        pv.axis
+    } else {
+        cv.axis
+    };
+    if ax == cost::NO_AXIS {
+        return;
+    }
+    let d = motion_delta(pv, cv, x.cut_aware);
+    let n = p.lost as f32;
+    let d = [d[0] + n * x.v_init[0], d[1] + n * x.v_init[1]];
+    let th = cost::direction_angle(d, cost::axis_vector(ax));
+    let th = th.min(core::f32::consts::PI - th);
+    f.m2 = th * th;
+}
 
 /// Minimum gain of a pair exchange in the Viterbi selection
 /// ([`greedy::improve_pairs`]); keeps near-ties with greedy's choice.
@@ -645,8 +683,10 @@ pub fn default_v_init(params: &Params, width: u32) -> [f32; 2] {
 /// candidate view `cv` (see `cost`), and whether it is a sign-free axis:
 /// the target's own velocity when known; else (its first transition) the
 /// body axis of the node's view, or of the candidate's when the node's
-/// gives none ([`TrackConfig::axis_direction`]); else zero (no direction
-/// cue).
+/// gives none ([`TrackConfig::axis_direction`]; for a predicted node, a
+/// newborn lost on its first transition, the angle is then taken from
+/// where the fish was seen, [`lost_newborn_direction`]); else zero (no
+/// direction cue).
 fn direction_ref(p: &NodeState, pv: &ViewFeat, cv: &ViewFeat) -> ([f32; 2], bool) {
     if p.vel_known {
         (p.vel, false)

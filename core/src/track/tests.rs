@@ -328,25 +328,38 @@ fn arb_obs() -> impl Strategy<Value = Observation> {
         proptest::option::of(-10.0f32..5000.0),
         any::<bool>(),
         -300.0f32..300.0,
+        (
+            prop_oneof![
+                8 => -4.0f32..4.0,
+                1 => Just(f32::NAN),
+                1 => Just(f32::INFINITY),
+                1 => Just(-1e38f32),
+                1 => -100.0f32..100.0,
+            ],
+            prop_oneof![4 => 0.0f32..8.0, 1 => Just(f32::NAN), 1 => Just(f32::INFINITY)],
+        ),
     )
-        .prop_map(|(x, y, bx, by, area, hist, depth, stereo, dx)| {
-            let left = CameraView {
-                cx: x,
-                cy: y,
-                bbox: Roi::new(bx, by, 300, 80),
-                area,
-                hist,
-                ..Default::default()
-            };
-            let mut right = left;
-            right.cx = x + dx;
-            Observation {
-                left,
-                right: stereo.then_some(right),
-                depth_mm: depth,
-                pair: 7,
-            }
-        })
+        .prop_map(
+            |(x, y, bx, by, area, hist, depth, stereo, dx, (angle, elongation))| {
+                let left = CameraView {
+                    cx: x,
+                    cy: y,
+                    bbox: Roi::new(bx, by, 300, 80),
+                    area,
+                    hist,
+                    angle,
+                    elongation,
+                };
+                let mut right = left;
+                right.cx = x + dx;
+                Observation {
+                    left,
+                    right: stereo.then_some(right),
+                    depth_mm: depth,
+                    pair: 7,
+                }
+            },
+        )
 }
 
 proptest! {
@@ -773,36 +786,34 @@ fn a_newborn_moves_along_its_body_axis() {
     // projects it but across its body (76° off its axis). Frame 2 carries
     // both on. With the body axis as the first transition's direction
     // reference the fish keeps its own continuation; without it
-    // (`axis_direction` false: vicinity alone) it takes the other fish.
+    // (`axis_direction` false: vicinity alone), or with views too round
+    // for an axis (elongation 1.5 < 2), it takes the other fish.
     let v = std::f32::consts::FRAC_PI_2;
     let h = 0.0;
-    let frames = std::vec![
-        std::vec![with_axis(fish(1000.0, 1000.0, 300.0, 6, 2000.0, 0), v, 4.0)],
+    let scene = |e: f32| {
         std::vec![
-            with_axis(fish(1000.0, 1400.0, 300.0, 6, 2000.0, 0), v, 4.0),
-            with_axis(fish(600.0, 1100.0, 300.0, 6, 2000.0, 1), h, 4.0),
-        ],
-        std::vec![
-            with_axis(fish(1000.0, 1800.0, 300.0, 6, 2000.0, 0), v, 4.0),
-            with_axis(fish(200.0, 1200.0, 300.0, 6, 2000.0, 1), h, 4.0),
-        ],
-    ];
-    for (axis, want) in [(true, 0u16), (false, 1)] {
+            std::vec![with_axis(fish(1000.0, 1000.0, 300.0, 6, 2000.0, 0), v, e)],
+            std::vec![
+                with_axis(fish(1000.0, 1400.0, 300.0, 6, 2000.0, 0), v, e),
+                with_axis(fish(600.0, 1100.0, 300.0, 6, 2000.0, 1), h, e),
+            ],
+            std::vec![
+                with_axis(fish(1000.0, 1800.0, 300.0, 6, 2000.0, 0), v, e),
+                with_axis(fish(200.0, 1200.0, 300.0, 6, 2000.0, 1), h, e),
+            ],
+        ]
+    };
+    // (axis on, elongation, the observation the fish takes at frames 1, 2)
+    for (axis, e, want) in [(true, 4.0, 0u16), (false, 4.0, 1), (true, 1.5, 1)] {
         let cfg = TrackConfig {
             axis_direction: axis,
             ..TrackConfig::for_frame(W, W)
         };
-        let log = run_cfg(&frames, cfg);
+        let log = run_cfg(&scene(e), cfg);
         let id = log.ids_of(0, 0);
         assert_eq!(id.len(), 1, "{:?}", log.frames);
-        assert_eq!(log.ids_of(1, want), id, "axis {axis}: {:?}", log.frames);
-        assert_eq!(log.ids_of(2, want), id, "axis {axis}: {:?}", log.frames);
+        let why = std::format!("axis {axis}, elongation {e}: {:?}", log.frames);
+        assert_eq!(log.ids_of(1, want), id, "{why}");
+        assert_eq!(log.ids_of(2, want), id, "{why}");
     }
-    // a view too round for an axis gives no direction: as without the cue
-    let round: std::vec::Vec<std::vec::Vec<Observation>> = frames
-        .iter()
-        .map(|f| f.iter().map(|o| with_axis(*o, o.left.angle, 1.5)).collect())
-        .collect();
-    let log = run_cfg(&round, TrackConfig::for_frame(W, W));
-    assert_eq!(log.ids_of(1, 1), log.ids_of(0, 0), "{:?}", log.frames);
 }

@@ -16,7 +16,9 @@
 //! (median displacement, else v_ref · W / 4.3); greedy MC/NN; capacities
 //! T, D, K, N; displacements between views the border cuts on one side of
 //! an axis measured on the uncut box sides (`cut_aware_motion`), boxes
-//! moved with a lost target's prediction.
+//! moved with a lost target's prediction; a newborn's first-transition
+//! direction cue against its view's body axis in whole degrees (or the
+//! candidate's; a lost newborn's from where it was seen; `axis_direction`).
 //! Differences that are allowed: f64 instead of f32, exact histogram CDFs
 //! instead of 16-bit fixed point.
 #![allow(clippy::needless_range_loop)] // index loops mirror the paper's notation
@@ -466,11 +468,34 @@ fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
             (pv.axis.or(cv.axis).unwrap_or([0.0, 0.0]), true)
         }
     };
-    let fl = feat(&p.left, v, &c.left, d, dir(&p.left, &c.left), k);
+    // A newborn lost on its first transition sits at its v_init guess: its
+    // direction is the displacement from where it was seen to the axis.
+    let lost_dir = |f: &mut Feat, pv: &View, cv: &View| {
+        if p.vel_known || p.lost == 0 {
+            return;
+        }
+        let Some(u) = pv.axis.or(cv.axis) else {
+            return;
+        };
+        let m = displacement(pv, cv, k.cut_aware);
+        let n = p.lost as f64;
+        let e = [m[0] + n * k.v_init[0], m[1] + n * k.v_init[1]];
+        let th = if e[0] * e[0] + e[1] * e[1] < 1.0 {
+            0.0
+        } else {
+            let cos = (e[0] * u[0] + e[1] * u[1]) / e[0].hypot(e[1]);
+            let th = cos.clamp(-1.0, 1.0).acos();
+            th.min(std::f64::consts::PI - th)
+        };
+        f.m2 = th * th;
+    };
+    let mut fl = feat(&p.left, v, &c.left, d, dir(&p.left, &c.left), k);
+    lost_dir(&mut fl, &p.left, &c.left);
     let cl = cam_cost(&fl, k, first);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let fr = feat(pr, v, cr, d, dir(pr, cr), k);
+            let mut fr = feat(pr, v, cr, d, dir(pr, cr), k);
+            lost_dir(&mut fr, pr, cr);
             let cr_ = cam_cost(&fr, k, first);
             (cl + cr_, fl, Some(fr))
         }
@@ -619,15 +644,15 @@ pub fn run_traced(
                 axis: (cfg.axis_direction
                     && !lo.iter().chain(&hi).any(|&c| c)
                     && v.elongation >= fishtrack_core::track::MIN_AXIS_ELONGATION
-                    && v.angle.is_finite())
-                .then(|| {
-                    // the line's direction in whole degrees (the core keeps
-                    // one byte per view), 0 to 179
-                    let d = ((v.angle as f64).to_degrees() % 180.0).round();
-                    let d = (if d < 0.0 { d + 180.0 } else { d }) % 180.0;
-                    let r = d.to_radians();
-                    [r.cos(), r.sin()]
-                }),
+                    && (v.angle as f64).abs() <= 8.0 * std::f64::consts::PI)
+                    .then(|| {
+                        // the line's direction in whole degrees (the core keeps
+                        // one byte per view), 0 to 179
+                        let d = ((v.angle as f64).to_degrees() % 180.0).round();
+                        let d = (if d < 0.0 { d + 180.0 } else { d }) % 180.0;
+                        let r = d.to_radians();
+                        [r.cos(), r.sin()]
+                    }),
             }
         };
         let cands: Vec<Cand> = obs
