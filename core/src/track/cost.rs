@@ -270,6 +270,34 @@ pub fn emd(a: &Option<Cdf>, b: &Option<Cdf>) -> f32 {
     }
 }
 
+/// The direction reference of eq. (7) for one camera's edge.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectionRef {
+    /// v_ref; zero gives no direction cue.
+    pub v_ref: [f32; 2],
+    /// `v_ref` is a sign-free body axis: θ is taken to its line,
+    /// min(θ, π − θ).
+    pub line: bool,
+    /// Added to the displacement before θ is measured: a newborn lost on
+    /// its first transition sits at `v_init`'s guess, and its heading is
+    /// measured from where it was seen, `lost · v_init` back.
+    pub offset: [f32; 2],
+}
+
+impl DirectionRef {
+    /// A target's own velocity (or the paper's fixed v_ref).
+    pub const fn velocity(v: [f32; 2]) -> DirectionRef {
+        DirectionRef {
+            v_ref: v,
+            line: false,
+            offset: [0.0; 2],
+        }
+    }
+
+    /// No direction cue.
+    pub const NONE: DirectionRef = DirectionRef::velocity([0.0; 2]);
+}
+
 /// θ(v, v_ref) of eq. (7) in [0, π]; 0 when ‖v‖ < 1 px or v_ref is zero.
 /// ([`edge_features`] folds it to [0, π/2] for a sign-free axis.)
 pub fn direction_angle(v: [f32; 2], v_ref: [f32; 2]) -> f32 {
@@ -296,18 +324,15 @@ pub fn normalised_area(area: f32, depth: Option<f32>, z_ref: f32) -> f32 {
 /// `vel`) to observation view `cand`: the vicinity is the displacement
 /// ([`motion_delta`]) minus `vel`, i.e. `x_j − x̂_i`. `depths` are (node,
 /// observation); the areas are depth-normalised only when both are known.
-/// `line`: `v_ref` is a body axis, so the direction angle is taken to its
-/// line (min(θ, π − θ)).
-#[allow(clippy::too_many_arguments)]
+/// `dir` is the direction reference ([`DirectionRef`]).
 pub fn edge_features(
     prev: &ViewFeat,
     vel: [f32; 2],
     cand: &ViewFeat,
     depths: (Option<f32>, Option<f32>),
-    v_ref: [f32; 2],
+    dir: DirectionRef,
     z_ref: f32,
     cut_aware: bool,
-    line: bool,
 ) -> EdgeFeatures {
     let disp = motion_delta(prev, cand, cut_aware);
     let dx = disp[0] - vel[0];
@@ -324,9 +349,10 @@ pub fn edge_features(
     } else {
         0.0
     };
-    let th = direction_angle(disp, v_ref);
+    let moved = [disp[0] + dir.offset[0], disp[1] + dir.offset[1]];
+    let th = direction_angle(moved, dir.v_ref);
     // an axis has no sign: the angle to its line
-    let th = if line {
+    let th = if dir.line {
         th.min(core::f32::consts::PI - th)
     } else {
         th
@@ -558,10 +584,9 @@ mod tests {
             [0.0, 0.0],
             &q,
             (Some(1000.0), Some(2000.0)),
-            [-1.0, 0.0],
+            DirectionRef::velocity([-1.0, 0.0]),
             2000.0,
             true,
-            false,
         );
         assert!(f.a2 < 1e-12);
         let g = edge_features(
@@ -569,10 +594,9 @@ mod tests {
             [0.0, 0.0],
             &q,
             (None, Some(2000.0)),
-            [-1.0, 0.0],
+            DirectionRef::velocity([-1.0, 0.0]),
             2000.0,
             true,
-            false,
         );
         assert!((g.a2 - 1.44).abs() < 1e-5); // 2·3000/5000 = 1.2
     }

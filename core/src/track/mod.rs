@@ -135,7 +135,7 @@ pub use outline::ViewOutline;
 use crate::error::ParamError;
 use crate::image::Roi;
 use crate::params::{Params, Tracker as Association};
-use cost::{camera_cost, cdf, edge_features, motion_delta, EdgeFeatures, ViewFeat};
+use cost::{camera_cost, cdf, edge_features, motion_delta, DirectionRef, EdgeFeatures, ViewFeat};
 use sigma::SigmaEstimator;
 use viterbi::{round_i16, Node, NodeState, Trellis, PREDICTED};
 
@@ -591,25 +591,20 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
     let first = !p.vel_known;
     let vel = if first { x.v_init } else { p.vel };
     let depths = (p.depth, c.depth);
-    let (v_ref, line) = direction_ref(p, &p.left, &c.left);
     let fl = edge_features(
         &p.left,
         vel,
         &c.left,
         depths,
-        v_ref,
+        direction_ref(p, &p.left, &c.left, x.v_init),
         x.z_ref,
         x.cut_aware,
-        line,
     );
-    let mut fl = fl;
-    lost_newborn_direction(p, &p.left, &c.left, &mut fl, x);
     let cl = camera_cost(&fl, &x.sig, first, x.cues, &x.robust);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let (v_ref, line) = direction_ref(p, pr, cr);
-            let mut fr = edge_features(pr, vel, cr, depths, v_ref, x.z_ref, x.cut_aware, line);
-            lost_newborn_direction(p, pr, cr, &mut fr, x);
+            let dir = direction_ref(p, pr, cr, x.v_init);
+            let fr = edge_features(pr, vel, cr, depths, dir, x.z_ref, x.cut_aware);
             let c_r = camera_cost(&fr, &x.sig, first, x.cues, &x.robust);
             Edge {
                 cost: cl + c_r,
@@ -628,37 +623,6 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
 /// Least elongation (`w_o / h_o`) of a view whose body axis gives a
 /// newborn's direction cue.
 pub const MIN_AXIS_ELONGATION: f32 = 2.0;
-
-/// The direction term of a newborn lost on its first transition (our
-/// addition, with [`TrackConfig::axis_direction`]): its predicted node
-/// sits at `v_init`'s guess, so the displacement whose angle to the body
-/// axis counts is the one from where the fish was seen, `lost` frames of
-/// `v_init` back, not from the guess.
-fn lost_newborn_direction(
-    p: &NodeState,
-    pv: &ViewFeat,
-    cv: &ViewFeat,
-    f: &mut EdgeFeatures,
-    x: &Ctx,
-) {
-    if p.vel_known || p.lost == 0 {
-        return;
-    }
-    let ax = if pv.axis != cost::NO_AXIS {
-        pv.axis
-    } else {
-        cv.axis
-    };
-    if ax == cost::NO_AXIS {
-        return;
-    }
-    let d = motion_delta(pv, cv, x.cut_aware);
-    let n = p.lost as f32;
-    let d = [d[0] + n * x.v_init[0], d[1] + n * x.v_init[1]];
-    let th = cost::direction_angle(d, cost::axis_vector(ax));
-    let th = th.min(core::f32::consts::PI - th);
-    f.m2 = th * th;
-}
 
 /// Minimum gain of a pair exchange in the Viterbi selection
 /// ([`greedy::improve_pairs`]); keeps near-ties with greedy's choice.
@@ -679,21 +643,30 @@ pub fn default_v_init(params: &Params, width: u32) -> [f32; 2] {
     [x * s, y * s]
 }
 
-/// v_ref of eq. (7) for one camera's edge from node `p` (view `pv`) to a
-/// candidate view `cv` (see `cost`), and whether it is a sign-free axis:
-/// the target's own velocity when known; else (its first transition) the
-/// body axis of the node's view, or of the candidate's when the node's
-/// gives none ([`TrackConfig::axis_direction`]; for a predicted node, a
-/// newborn lost on its first transition, the angle is then taken from
-/// where the fish was seen, [`lost_newborn_direction`]); else zero (no
-/// direction cue).
-fn direction_ref(p: &NodeState, pv: &ViewFeat, cv: &ViewFeat) -> ([f32; 2], bool) {
+/// The direction reference of eq. (7) for one camera's edge from node `p`
+/// (view `pv`) to a candidate view `cv` (see `cost`): the target's own
+/// velocity when known; else (its first transition) the sign-free body
+/// axis of the node's view, or of the candidate's when the node's gives
+/// none ([`TrackConfig::axis_direction`]), measured on the displacement
+/// from where the fish was seen (a predicted node, a newborn lost on its
+/// first transition, sits `lost · v_init` beyond it); else none.
+fn direction_ref(p: &NodeState, pv: &ViewFeat, cv: &ViewFeat, v_init: [f32; 2]) -> DirectionRef {
     if p.vel_known {
-        (p.vel, false)
-    } else if pv.axis != cost::NO_AXIS {
-        (cost::axis_vector(pv.axis), true)
+        return DirectionRef::velocity(p.vel);
+    }
+    let ax = if pv.axis != cost::NO_AXIS {
+        pv.axis
     } else {
-        (cost::axis_vector(cv.axis), true)
+        cv.axis
+    };
+    if ax == cost::NO_AXIS {
+        return DirectionRef::NONE;
+    }
+    let n = p.lost as f32;
+    DirectionRef {
+        v_ref: cost::axis_vector(ax),
+        line: true,
+        offset: [n * v_init[0], n * v_init[1]],
     }
 }
 

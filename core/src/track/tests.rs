@@ -593,7 +593,15 @@ fn motion_delta_uses_the_sides_the_border_does_not_cut() {
     // exactly, where its centroid step would be 125 px short
     let edge = |aware| {
         let v = [-500.0, 70.0];
-        cost::edge_features(&a, v, &b, (None, None), [-1.0, 0.0], 2000.0, aware, false)
+        cost::edge_features(
+            &a,
+            v,
+            &b,
+            (None, None),
+            cost::DirectionRef::velocity([-1.0, 0.0]),
+            2000.0,
+            aware,
+        )
     };
     let (f, g) = (edge(true), edge(false));
     assert_eq!(f.d2, 0.0);

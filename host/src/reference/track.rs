@@ -307,7 +307,7 @@ fn feat(
     vel: [f64; 2],
     c: &View,
     depths: (Option<f64>, Option<f64>),
-    (v_ref, line): ([f64; 2], bool),
+    (v_ref, line, offset): ([f64; 2], bool, [f64; 2]),
     k: &Costs,
 ) -> Feat {
     let norm = |a: f64, z: Option<f64>| match (depths, z) {
@@ -324,12 +324,14 @@ fn feat(
         0.0
     };
     let v = displacement(p, c, k.cut_aware);
-    let th = if v[0] * v[0] + v[1] * v[1] < 1.0 || v_ref == [0.0, 0.0] {
+    // the direction's displacement (a lost newborn's from its sighting)
+    let w = [v[0] + offset[0], v[1] + offset[1]];
+    let th = if w[0] * w[0] + w[1] * w[1] < 1.0 || v_ref == [0.0, 0.0] {
         0.0
     } else {
         // Angle between v and v_ref by the cosine formula, eq. (7).
         let cos =
-            (v[0] * v_ref[0] + v[1] * v_ref[1]) / (v[0].hypot(v[1]) * v_ref[0].hypot(v_ref[1]));
+            (w[0] * v_ref[0] + w[1] * v_ref[1]) / (w[0].hypot(w[1]) * v_ref[0].hypot(v_ref[1]));
         let th = cos.clamp(-1.0, 1.0).acos();
         // a body axis has no sign: the angle to its line
         if line {
@@ -460,42 +462,22 @@ fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
     let v = if first { k.v_init } else { p.vel };
     let d = (p.depth, c.depth);
     // Direction reference: the target's own velocity; in its first frame
-    // the body axis of the node's view, else of the candidate's, else none.
-    let dir = |pv: &View, cv: &View| {
-        if p.vel_known {
-            (p.vel, false)
-        } else {
-            (pv.axis.or(cv.axis).unwrap_or([0.0, 0.0]), true)
+    // the sign-free body axis of the node's view, else of the candidate's,
+    // measured from where the fish was seen (a lost newborn's node sits
+    // `lost` steps of v_init beyond it); else none.
+    let dir = |pv: &View, cv: &View| match (p.vel_known, pv.axis.or(cv.axis)) {
+        (true, _) => (p.vel, false, [0.0, 0.0]),
+        (false, Some(u)) => {
+            let n = p.lost as f64;
+            (u, true, [n * k.v_init[0], n * k.v_init[1]])
         }
+        (false, None) => ([0.0, 0.0], false, [0.0, 0.0]),
     };
-    // A newborn lost on its first transition sits at its v_init guess: its
-    // direction is the displacement from where it was seen to the axis.
-    let lost_dir = |f: &mut Feat, pv: &View, cv: &View| {
-        if p.vel_known || p.lost == 0 {
-            return;
-        }
-        let Some(u) = pv.axis.or(cv.axis) else {
-            return;
-        };
-        let m = displacement(pv, cv, k.cut_aware);
-        let n = p.lost as f64;
-        let e = [m[0] + n * k.v_init[0], m[1] + n * k.v_init[1]];
-        let th = if e[0] * e[0] + e[1] * e[1] < 1.0 {
-            0.0
-        } else {
-            let cos = (e[0] * u[0] + e[1] * u[1]) / e[0].hypot(e[1]);
-            let th = cos.clamp(-1.0, 1.0).acos();
-            th.min(std::f64::consts::PI - th)
-        };
-        f.m2 = th * th;
-    };
-    let mut fl = feat(&p.left, v, &c.left, d, dir(&p.left, &c.left), k);
-    lost_dir(&mut fl, &p.left, &c.left);
+    let fl = feat(&p.left, v, &c.left, d, dir(&p.left, &c.left), k);
     let cl = cam_cost(&fl, k, first);
     match (&p.right, &c.right) {
         (Some(pr), Some(cr)) => {
-            let mut fr = feat(pr, v, cr, d, dir(pr, cr), k);
-            lost_dir(&mut fr, pr, cr);
+            let fr = feat(pr, v, cr, d, dir(pr, cr), k);
             let cr_ = cam_cost(&fr, k, first);
             (cl + cr_, fl, Some(fr))
         }
