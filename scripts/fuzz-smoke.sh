@@ -7,6 +7,13 @@
 #
 #   scripts/fuzz-smoke.sh            # all targets
 #   FUZZ_SECONDS=600 scripts/fuzz-smoke.sh segment   # a real run of one
+#   FUZZ_SANITIZER=address scripts/fuzz-smoke.sh     # with AddressSanitizer
+#
+# Sanitizer: none by default (session 36). The workspace has no `unsafe`
+# code (core denies it; Miri checks core, scripts/miri.sh), so the fuzzing
+# looks for panics, hangs and overflows, which need no sanitizer. Without
+# AddressSanitizer the build took 5 min 23 s instead of 7 min 53 s on 2
+# cores, and the segment target ran 23 538 inputs in 12 s instead of 7 880.
 #
 # Needs the nightly toolchain and cargo-fuzz (`cargo install cargo-fuzz
 # --locked`); if they are missing and cannot be installed, the script says
@@ -32,14 +39,15 @@ if ! cargo fuzz --version >/dev/null 2>&1; then
     fi
 fi
 
-cargo +nightly fuzz build -O
+SANITIZER="${FUZZ_SANITIZER:-none}"
+cargo +nightly fuzz build -O -s "$SANITIZER"
 for t in "${TARGETS[@]}"; do
     scratch="$(mktemp -d)"
     log="$scratch.log"
     echo "fuzz-smoke.sh: $t for ${SECONDS_EACH}s"
     # New inputs land in $scratch (the first corpus dir); the committed corpus is only read.
     status=0
-    cargo +nightly fuzz run -O "$t" "$scratch" "corpus/$t" -- \
+    cargo +nightly fuzz run -O -s "$SANITIZER" "$t" "$scratch" "corpus/$t" -- \
         -max_total_time="$SECONDS_EACH" -print_final_stats=1 >"$log" 2>&1 || status=$?
     grep -E '^stat::(number_of_executed_units|new_units_added)' "$log" || true
     if [ "$status" -ne 0 ]; then
