@@ -7,7 +7,8 @@
 //! cargo run --release -p fishtrack --example seg_eval -- [--single] [--no-bp]
 //!     [--no-var] [--bins N] [--paper] [--literal-var]
 //!     [--full-res-coarse] [--var-min X] [--elong X] [--smooth K]
-//!     [--alpha A|auto|canvas] [--split | --no-split] [--no-dim] [--out DIR] HAUL...
+//!     [--alpha A|auto|canvas] [--split | --no-split] [--no-dim]
+//!     [--params FILE] [--out DIR] HAUL...
 //!
 //! `--paper` runs the paper's Section III alone (full-resolution coarse
 //! gradient with one global threshold, literal θ_V, no elongation test, no
@@ -15,6 +16,10 @@
 //! `--split` / `--no-split` turn the split of merged objects
 //! (`Params::split_merged`, `fishtrack_core::segment::split`) on / off.
 //! `--no-dim` turns off the dim level (`Params::dim_level`).
+//! `--params FILE` starts from a `fishtrack track --params` TOML file's
+//! parameters (its `[track]` table is ignored); the flags apply on top,
+//! and `double_threshold`, `backprojection`, `variance_rejection` and
+//! `variance_literal` always come from the flags.
 //! ```
 
 use std::path::PathBuf;
@@ -39,6 +44,7 @@ fn main() -> Result<()> {
     let mut out = std::env::temp_dir().join("seg_eval");
     let mut hauls = Vec::new();
     let mut alpha = Scaling::default();
+    let mut params_file: Option<PathBuf> = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--single" => single = true,
@@ -61,6 +67,7 @@ fn main() -> Result<()> {
                 alpha = fishtrack::track_cmd::parse_scaling(&args.next().context("--alpha A")?)?
             }
             "--out" => out = PathBuf::from(args.next().context("--out DIR")?),
+            "--params" => params_file = Some(PathBuf::from(args.next().context("--params FILE")?)),
             s if s.starts_with("--") => bail!("unknown option {s}"),
             _ => hauls.push(PathBuf::from(a)),
         }
@@ -73,7 +80,10 @@ fn main() -> Result<()> {
     println!("haul                     frames  objects  precision  recall  large-MAPE  measured");
     for haul in &hauls {
         let truth = fishtrack::truth::Truth::load(&haul.join("truth.json"))?;
-        let mut p = Params::for_frame(truth.width);
+        let mut p = match &params_file {
+            Some(f) => fishtrack::params_file::load_params(f, truth.width)?.params,
+            None => Params::for_frame(truth.width),
+        };
         p.double_threshold = !single;
         p.backprojection = !no_bp;
         p.variance_rejection = !no_var;

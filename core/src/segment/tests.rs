@@ -737,3 +737,105 @@ fn a_coarse_mesh_left_by_the_openings_is_no_fish() {
         );
     }
 }
+
+#[test]
+#[cfg_attr(miri, ignore)]
+fn a_soft_outline_needs_the_weak_ratio_only_when_the_object_is_dim() {
+    // a plateau with a 15-px linear skirt (the top of a smooth debris blob
+    // that Otsu splits off): its outline step is between 0.3 and 0.35 of
+    // its contrast, so the plain edge test passes it. Its skirt also
+    // widens the water σ of Otsu's lower class, so at 14 grey levels it
+    // is under 3.5 water σ: the default refuses it by the 0.4 ratio. At 28
+    // it is no weak object and stays unless the limit is raised to 20 σ.
+    // A sharp body at 14 stays either way.
+    let (w, h) = (512, 512);
+    let (cx, cy, a, b, angle) = (256.0, 256.0, 60.0, 22.0, -0.4);
+    let soft = |peak: f32| {
+        move |x: f32, y: f32| {
+            let (u, v) = axes(x, y, cx, cy, angle);
+            let r = (u * u / (a * a) + v * v / (b * b)).sqrt();
+            peak * (1.0 - (r - 1.0) / 0.7).clamp(0.0, 1.0)
+        }
+    };
+    let sharp = |x: f32, y: f32| {
+        let (u, v) = axes(x, y, cx, cy, angle);
+        if u * u / (a * a) + v * v / (b * b) <= 1.0 {
+            14.0
+        } else {
+            0.0
+        }
+    };
+    let objects = |img: &[u8], weak: f32| {
+        let mut p = Params::for_frame(w as u32);
+        p.weak_contrast_sigmas = weak;
+        let mut out: Objects<32, 8192> = Objects::new();
+        let st = run(img, w, h, &p, &mut out);
+        (out.items.len(), st.rejected_edge)
+    };
+    assert_eq!(Params::default().weak_contrast_sigmas, 3.5);
+    for seed in 1..=3u64 {
+        let dim = water_with(w, h, 1.5, seed, soft(14.0));
+        let bright = water_with(w, h, 1.5, seed, soft(28.0));
+        let f = water_with(w, h, 1.5, seed, sharp);
+        assert_eq!(
+            objects(&dim, 0.0),
+            (1, 0),
+            "seed {seed}: rule off, it passes"
+        );
+        assert_eq!(
+            objects(&dim, 3.5),
+            (0, 1),
+            "seed {seed}: dim and soft, refused"
+        );
+        assert_eq!(
+            objects(&bright, 3.5),
+            (1, 0),
+            "seed {seed}: bright, not weak"
+        );
+        assert_eq!(
+            objects(&bright, 20.0),
+            (0, 1),
+            "seed {seed}: counted weak, refused"
+        );
+        assert_eq!(objects(&f, 3.5), (1, 0), "seed {seed}: sharp, kept");
+        assert_eq!(
+            objects(&f, 20.0),
+            (1, 0),
+            "seed {seed}: sharp and weak, kept"
+        );
+    }
+}
+
+#[test]
+fn the_weak_ratio_applies_under_the_contrast_limit_only() {
+    use super::local::{required_edge_ratio, EdgeSteps};
+    let p = Params::default();
+    // contrast = seen / seen_count − w_med: 5 and 6 grey levels over water 32
+    let e = |mean: u64| EdgeSteps {
+        sum: 0,
+        count: 100,
+        seen: mean * 50,
+        seen_count: 50,
+    };
+    // s_w 1.5: the limit is 3.5 · 1.5 = 5.25 grey levels
+    assert_eq!(required_edge_ratio(&e(37), 32, 1.5, &p), 0.4);
+    assert_eq!(required_edge_ratio(&e(38), 32, 1.5, &p), 0.3);
+    // a larger water σ makes the same object weak
+    assert_eq!(required_edge_ratio(&e(38), 32, 2.0, &p), 0.4);
+    // off; no pixels; a weak ratio under the plain one never lowers it
+    let off = Params {
+        weak_contrast_sigmas: 0.0,
+        ..p
+    };
+    assert_eq!(required_edge_ratio(&e(37), 32, 1.5, &off), 0.3);
+    let none = EdgeSteps {
+        seen_count: 0,
+        ..e(37)
+    };
+    assert_eq!(required_edge_ratio(&none, 32, 1.5, &p), 0.3);
+    let low = Params {
+        weak_edge_step_ratio: 0.1,
+        ..p
+    };
+    assert_eq!(required_edge_ratio(&e(37), 32, 1.5, &low), 0.3);
+}

@@ -791,7 +791,7 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                         &at,
                         (rw, rh),
                         w_med,
-                        (p.edge_step_ratio, p.edge_gap),
+                        (edge_ratio_for(p, s_w), p.edge_gap),
                     )
                 {
                     continue;
@@ -860,7 +860,7 @@ fn edge_sharp(
     at: &dyn Fn(u32) -> u8,
     (rw, rh): (u32, u32),
     w_med: f64,
-    (ratio, gap): (f32, u8),
+    (ratio, gap): (impl Fn(f64) -> f32, u8),
 ) -> bool {
     use fishtrack_core::segment::local::EDGE_MIN_SAMPLES;
     let g = gap as i64;
@@ -912,7 +912,21 @@ fn edge_sharp(
     }
     let step = sum / n as f64;
     let contrast = seen / seen_n as f64 - w_med;
+    let ratio = ratio(contrast);
     contrast <= 0.0 || step >= ratio as f64 * contrast
+}
+
+/// The edge ratio an object of contrast `c` (grey levels above the water)
+/// must reach (core: `local::required_edge_ratio`): `weak_edge_step_ratio`
+/// (at least `edge_step_ratio`) under `weak_contrast_sigmas` water σ `s_w`.
+fn edge_ratio_for(p: &Params, s_w: f64) -> impl Fn(f64) -> f32 + '_ {
+    move |c: f64| {
+        if p.weak_contrast_sigmas > 0.0 && c < p.weak_contrast_sigmas as f64 * s_w {
+            p.edge_step_ratio.max(p.weak_edge_step_ratio)
+        } else {
+            p.edge_step_ratio
+        }
+    }
 }
 
 /// One fish, one object: an object sharing more than half of the smaller
