@@ -173,7 +173,8 @@ pub struct Params {
     /// the contrast rescue (3 σ) and the edge test (0.3) by a hair
     /// (measured on seeds 1–12: debris objects at 2.8–3.1 σ with steps of
     /// 0.31–0.38 of their contrast), while fish that dim have steps of 0.4
-    /// or more (35 of 36). 0 turns the rule off. Default 3.5.
+    /// or more (35 of 36). 0 turns the rule off; it is part of the edge
+    /// test, so `edge_step_ratio = 0` turns it off too. Default 3.5.
     pub weak_contrast_sigmas: f32,
     /// The edge test's ratio for the objects under `weak_contrast_sigmas`
     /// (never below `edge_step_ratio`). Default 0.4.

@@ -124,6 +124,8 @@ fuzz_target!(|data: &[u8]| {
     p.high_floor_sigmas = b.f32(p.high_floor_sigmas);
     p.edge_step_ratio = b.f32(p.edge_step_ratio);
     p.min_fill = b.f32(p.min_fill);
+    p.weak_contrast_sigmas = b.f32(p.weak_contrast_sigmas);
+    p.weak_edge_step_ratio = b.f32(p.weak_edge_step_ratio);
 
     // Pixels: the rest of the input, cycled; a flat grey frame when empty.
     let pixels = b.0;
