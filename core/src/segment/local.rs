@@ -863,8 +863,13 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                 seen: rec[30],
                 seen_count: rec[31],
             };
-            let ratio = required_edge_ratio(&steps, w_med, w_sigma.max(params.noise_floor), params);
-            if edge_test && !edge_sharp_enough(&steps, w_med, ratio) {
+            if edge_test
+                && !edge_sharp_enough(
+                    &steps,
+                    w_med,
+                    required_edge_ratio(&steps, w_med, w_sigma.max(params.noise_floor), params),
+                )
+            {
                 stats.rejected_edge += 1;
                 continue;
             }
@@ -941,6 +946,15 @@ pub struct EdgeSteps {
     pub seen_count: u64,
 }
 
+impl EdgeSteps {
+    /// The object's contrast the edge test judges against: its thresholded
+    /// mean inside the ellipse minus the water's median `w_med`. Callers
+    /// check `seen_count > 0` first.
+    fn contrast(&self, w_med: u8) -> f64 {
+        self.seen as f64 / self.seen_count as f64 - w_med as f64
+    }
+}
+
 /// The edge test (beyond the paper, `Params::edge_step_ratio`): the mean
 /// step across the outline must be at least `ratio` times the object's
 /// contrast, its thresholded mean (inside the ellipse) minus the water's
@@ -952,7 +966,7 @@ pub fn edge_sharp_enough(e: &EdgeSteps, w_med: u8, ratio: f32) -> bool {
         return true;
     }
     let step = e.sum as f64 / e.count as f64;
-    let contrast = e.seen as f64 / e.seen_count as f64 - w_med as f64;
+    let contrast = e.contrast(w_med);
     contrast <= 0.0 || step >= ratio as f64 * contrast
 }
 
@@ -971,8 +985,7 @@ pub fn required_edge_ratio(e: &EdgeSteps, w_med: u8, s_w: f32, params: &Params) 
     if params.weak_contrast_sigmas <= 0.0 || e.seen_count == 0 {
         return base;
     }
-    let contrast = e.seen as f64 / e.seen_count as f64 - w_med as f64;
-    if contrast < params.weak_contrast_sigmas as f64 * s_w as f64 {
+    if e.contrast(w_med) < params.weak_contrast_sigmas as f64 * s_w as f64 {
         base.max(params.weak_edge_step_ratio)
     } else {
         base
