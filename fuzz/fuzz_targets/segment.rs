@@ -126,6 +126,7 @@ fuzz_target!(|data: &[u8]| {
     p.min_fill = b.f32(p.min_fill);
     p.weak_contrast_sigmas = b.f32(p.weak_contrast_sigmas);
     p.weak_edge_step_ratio = b.f32(p.weak_edge_step_ratio);
+    p.mesh_residue_ratio = b.f32(p.mesh_residue_ratio);
 
     // Pixels: the rest of the input, cycled; a flat grey frame when empty.
     let pixels = b.0;

@@ -114,6 +114,7 @@ fn main() -> Result<()> {
             p.high_floor_sigmas = 0.0;
             p.edge_step_ratio = 0.0;
             p.min_fill = 0.0;
+            p.mesh_residue_ratio = 0.0;
         }
         if let Some(r) = bg_r {
             p.background_radius = r;

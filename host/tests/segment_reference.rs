@@ -250,11 +250,13 @@ mod random {
             floor in prop::sample::select(vec![0.0f32, 2.0, 3.5]),
             edge in prop::sample::select(vec![0.0f32, 0.3, 0.6]),
             weak in prop::sample::select(vec![0.0f32, 3.5, 20.0]),
+            residue in prop::sample::select(vec![0.0f32, 0.3, 1.0]),
         ) {
             let (img, _) = frame(w, h, n, noise, mesh, seed);
             let p = Params { double_threshold: dt, backprojection: bp, hist_bins: bins,
                 coarse_scale: scale, variance_literal: literal, high_floor_sigmas: floor,
-                edge_step_ratio: edge, weak_contrast_sigmas: weak, ..Params::for_frame(512) };
+                edge_step_ratio: edge, weak_contrast_sigmas: weak, mesh_residue_ratio: residue,
+                ..Params::for_frame(512) };
             let (agr, _) = compare_segmentation(&img, &p).unwrap();
             prop_assert!(agr.passes(), "{:?}", agr);
             eprintln!("random frame {w}x{h}: {} objects, {} regions compared", agr.core_objects, agr.regions_matched);

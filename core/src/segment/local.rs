@@ -51,7 +51,12 @@
 //!   water σ of contrast needs the higher `weak_edge_step_ratio`
 //!   ([`required_edge_ratio`]: the top of a smooth debris blob clears the
 //!   contrast rescue and the plain edge test by a hair; seeds 1–30 seg
-//!   precision 0.950 → 0.957 at recall 0.799 → 0.797, session 37).
+//!   precision 0.950 → 0.957 at recall 0.799 → 0.797, session 37); and
+//!   (beyond the paper, `Params::mesh_residue_ratio`) objects that are
+//!   mostly what the mesh removal took away are dropped
+//!   ([`not_mesh_residue`]: the line openings leave a faint copy of the
+//!   net, a few grey levels above the water, in the mesh-free frame;
+//!   session 38).
 //! - The dim level (beyond the paper, `Params::dim_level`): Otsu's τ of a
 //!   region holding a bright fish and a dim one falls between them and
 //!   eq. (1)'s τ_low above the dim one, which is lost. So once level 0
@@ -401,6 +406,7 @@ fn clear_rec(rec: &mut [u64; STAT_WORDS]) {
 /// Segments one region and emits its objects into `out`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn segment_region<const N: usize, const R: usize>(
+    raw: ImageView<'_>,
     frame: ImageView<'_>,
     region: &Region,
     bg: Option<&BgGrid<'_>>,
@@ -436,6 +442,9 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
     let spans = spans.get_mut(..rh).ok_or(SegmentError::WorkspaceTooSmall)?;
     ellipse_spans(&reg, roi, spans);
     let pv = frame.sub(roi).map_err(SegmentError::Image)?;
+    // the frame before the mesh removal, for the mesh-residue test
+    let mesh_test = params.mesh_residue_ratio > 0.0 && params.mesh_line_len >= 3;
+    let rv = raw.sub(roi).map_err(SegmentError::Image)?;
     // the columns of row j inside the ellipse (spans are within the ROI)
     let span = |sp: &[i32; 2]| (sp[0].max(0) as usize).min(rw)..(sp[1].max(0) as usize).min(rw);
     let a = bufs.a.get_mut(..n).ok_or(SegmentError::WorkspaceTooSmall)?;
@@ -784,6 +793,8 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
         };
         // the edge test reads the final mask `a`, which the split reuses
         let edge_test = params.edge_step_ratio > 0.0 && !params.split_merged;
+        // both tests judge an object against its contrast (`EdgeSteps::seen`)
+        let contrast_needed = edge_test || mesh_test;
         let n2s = (n2 as usize).min(cap);
         stats.label_overflow += n2 - n2s as u32;
         for rec in recs.iter_mut().take(n2s) {
@@ -810,6 +821,10 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                     return;
                 };
                 let px = row.get(i0..i1).unwrap_or(&[]);
+                if mesh_test {
+                    let rp = rv.row(j).get(i0..i1).unwrap_or(&[]);
+                    rec[32] += removed_sum(rp, px);
+                }
                 let (s1, s2) = sum_sumsq(px);
                 rec[10] += s1;
                 rec[11] += s2;
@@ -831,12 +846,15 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                 let mut m = Moments::from_words(&rec[..10]);
                 m.add_run(y, roi.x + i0 as u32, roi.x + i1 as u32);
                 m.to_words(&mut rec[..10]);
+                if contrast_needed {
+                    let (seen, seen_count) = seen_in_span(sv, spans, j, i0..i1);
+                    rec[30] += seen;
+                    rec[31] += seen_count;
+                }
                 if edge_test {
                     let e = edge_steps(sv, a, spans, (rw, rh), j, i0..i1, params.edge_gap as usize);
                     rec[28] = rec[28].wrapping_add(e.sum as u64);
                     rec[29] += e.count;
-                    rec[30] += e.seen;
-                    rec[31] += e.seen_count;
                 }
             });
         }
@@ -871,6 +889,12 @@ pub(crate) fn segment_region<const N: usize, const R: usize>(
                 )
             {
                 stats.rejected_edge += 1;
+                continue;
+            }
+            if mesh_test
+                && !not_mesh_residue(rec[32], m.area, &steps, w_med, params.mesh_residue_ratio)
+            {
+                stats.rejected_mesh += 1;
                 continue;
             }
             if level == 0 {
@@ -1047,12 +1071,7 @@ fn edge_steps(
         }
         sample((j, i1 - 1 - g), (j, i1 + g));
     }
-    let (mut seen, mut seen_count) = (0u64, 0u64);
     for x in i0..i1 {
-        if in_span(j, x) {
-            seen += px(j, x) as u64;
-            seen_count += 1;
-        }
         if j >= g && !inside(j + 1, x) {
             sample((j - g, x), (j + 1 + g, x));
         }
@@ -1060,9 +1079,60 @@ fn edge_steps(
             sample((j + g, x), (j - 1 - g, x));
         }
     }
-    e.seen = seen;
-    e.seen_count = seen_count;
     e
+}
+
+/// The thresholded pixels `sv` of an object's run (row `j`, columns
+/// `cols`) inside the ellipse (`spans`): their sum and number, the parts of
+/// [`EdgeSteps::seen`] and [`EdgeSteps::seen_count`].
+fn seen_in_span(
+    sv: ImageView<'_>,
+    spans: &[[i32; 2]],
+    j: usize,
+    cols: core::ops::Range<usize>,
+) -> (u64, u64) {
+    let Some(sp) = spans.get(j) else {
+        return (0, 0);
+    };
+    let x0 = (sp[0].max(0) as usize).clamp(cols.start, cols.end);
+    let x1 = (sp[1].max(0) as usize).clamp(x0, cols.end);
+    let px = sv.row(j).get(x0..x1).unwrap_or(&[]);
+    (sum_sumsq(px).0, px.len() as u64)
+}
+
+/// Σ (raw − mesh-free) over one run's pixels: the grey levels the mesh
+/// removal took from them (it is anti-extensive, so no term is negative;
+/// a negative one would count 0).
+pub fn removed_sum(raw: &[u8], filtered: &[u8]) -> u64 {
+    // 1024 · 255 < 2³²: each block's sum fits u32 (and vectorises)
+    raw.chunks(1024)
+        .zip(filtered.chunks(1024))
+        .map(|(r, f)| {
+            r.iter()
+                .zip(f)
+                .map(|(&r, &f)| r.saturating_sub(f) as u32)
+                .sum::<u32>() as u64
+        })
+        .sum()
+}
+
+/// The mesh-residue test (beyond the paper, `Params::mesh_residue_ratio`):
+/// `true` (the object stays) unless the mean of what the mesh removal took
+/// from the object's `area` pixels (`removed`, [`removed_sum`]) reaches
+/// `ratio` times its contrast, measured as [`edge_sharp_enough`] measures
+/// it (thresholded mean inside the ellipse above the water's median
+/// `w_med`). An object with no pixel inside the ellipse, or no contrast,
+/// stays. Why: the line openings of Section V.A leave a faint copy of the
+/// trawl mesh in the mesh-free frame; a patch of it is what the removal
+/// took most of, while a fish, hiding the net behind it, loses only its
+/// texture's peaks and its noise. In `f64`, in the order the reference
+/// computes it.
+pub fn not_mesh_residue(removed: u64, area: u64, e: &EdgeSteps, w_med: u8, ratio: f32) -> bool {
+    if ratio <= 0.0 || area == 0 || e.seen_count == 0 {
+        return true;
+    }
+    let contrast = e.contrast(w_med);
+    contrast <= 0.0 || (removed as f64 / area as f64) < ratio as f64 * contrast
 }
 
 #[cfg(test)]

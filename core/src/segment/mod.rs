@@ -29,7 +29,7 @@
 //!
 //! `Params { coarse_scale: 1, variance_literal: true, min_elongation: 1.0,
 //! split_merged: false, dim_level: false, high_floor_sigmas: 0.0,
-//! edge_step_ratio: 0.0, min_fill: 0.0, .. }` is the paper's Section III
+//! edge_step_ratio: 0.0, min_fill: 0.0, mesh_residue_ratio: 0.0, .. }` is the paper's Section III
 //! exactly.
 //! 3. Here: the objects of all regions are merged into one
 //!    [`Objects`] set — duplicates removed, capacity enforced.
@@ -62,7 +62,7 @@
 //! 4 KiB, and works in the region's own buffers: workspace size unchanged).
 //!
 //! For 2048 × 2048 frames and [`RECOMMENDED_MAX_ROI_PIXELS`] (1 Mpx):
-//! `workspace_size(2048, 2048, 1 << 20)` = 18 123 092 bytes (17.3 MiB):
+//! `workspace_size(2048, 2048, 1 << 20)` = 18 125 140 bytes (17.3 MiB):
 //! 8 MiB for the two frame buffers (the second one, the full-resolution
 //! gradient, also holds the 4 × 4-downsampled frame, its gradient, labels
 //! and masks: 2.5 MiB, so the reduced-resolution pass costs no memory), 1 MiB for the morphology ring (sized
@@ -185,6 +185,9 @@ pub struct SegmentStats {
     /// Final objects rejected by the edge test
     /// ([`local::edge_sharp_enough`], `Params::edge_step_ratio`).
     pub rejected_edge: u32,
+    /// Final objects rejected by the mesh-residue test
+    /// ([`local::not_mesh_residue`], `Params::mesh_residue_ratio`).
+    pub rejected_mesh: u32,
     /// Dim-level objects dropped as parts of a larger level-0 object they
     /// touch (`Params::dim_level`).
     pub rejected_fragment: u32,
@@ -373,6 +376,7 @@ pub fn segment_frame_traced<const N: usize, const R: usize>(
         let region = coarse::decode_region(rw);
         stats.regions += 1;
         local::segment_region(
+            img,
             frame,
             &region,
             bg.as_ref(),

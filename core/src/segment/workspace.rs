@@ -16,8 +16,9 @@ pub(crate) const REGION_WORDS: usize = 8;
 
 /// Words of a per-component statistics record: moments (10), Σp, Σp²,
 /// 16-bin histogram (16), the edge test's samples (4:
-/// [`super::local::EdgeSteps`]).
-pub(crate) const STAT_WORDS: usize = 32;
+/// [`super::local::EdgeSteps`]), the grey levels the mesh removal took
+/// (1: [`super::local::removed_sum`]).
+pub(crate) const STAT_WORDS: usize = 33;
 
 /// Bytes of ROI scratch per ROI pixel: four 8-bit masks and an `i32` label.
 pub const BYTES_PER_ROI_PIXEL: usize = 8;

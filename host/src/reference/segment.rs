@@ -796,6 +796,21 @@ pub fn segment(img: &GrayImage, p: &Params) -> RefResult {
                 {
                     continue;
                 }
+                if p.mesh_residue_ratio > 0.0
+                    && p.mesh_line_len >= 3
+                    && is_mesh_residue(
+                        comp,
+                        (img, &filtered),
+                        (x0, y0),
+                        &ins,
+                        &at,
+                        rw,
+                        w_med,
+                        p.mesh_residue_ratio,
+                    )
+                {
+                    continue;
+                }
                 if level == 0 {
                     area0 = area0.max(comp.len());
                 } else if 2 * comp.len() < area0 && touches_cleared(comp) {
@@ -914,6 +929,43 @@ fn edge_sharp(
     let contrast = seen / seen_n as f64 - w_med;
     let ratio = ratio(contrast);
     contrast <= 0.0 || step >= ratio as f64 * contrast
+}
+
+/// The mesh-residue test (core: `segment::local::not_mesh_residue`): the
+/// object (pixels `comp` in the region's box at `(x0, y0)`, `rw` wide) is a
+/// residue of the trawl mesh when the mean of raw − mesh-free over its
+/// pixels reaches `ratio` times its contrast: its thresholded mean inside
+/// the ellipse (`ins`, values `at`) above the water median `w_med`. An
+/// object with no pixel inside the ellipse or no contrast is no residue.
+#[allow(clippy::too_many_arguments)]
+fn is_mesh_residue(
+    comp: &[(u32, u32)],
+    (raw, filtered): (&GrayImage, &GrayImage),
+    (x0, y0): (u32, u32),
+    ins: &[bool],
+    at: &dyn Fn(u32) -> u8,
+    rw: u32,
+    w_med: f64,
+    ratio: f32,
+) -> bool {
+    let mut removed = 0u64;
+    let (mut seen, mut seen_n) = (0u64, 0u64);
+    for &(x, y) in comp {
+        let (fx, fy) = (x + x0, y + y0);
+        let r = raw.get_pixel(fx, fy).0[0] as i64;
+        let f = filtered.get_pixel(fx, fy).0[0] as i64;
+        removed += (r - f).max(0) as u64;
+        let i = y * rw + x;
+        if ins[i as usize] {
+            seen += at(i) as u64;
+            seen_n += 1;
+        }
+    }
+    if comp.is_empty() || seen_n == 0 {
+        return false;
+    }
+    let contrast = seen as f64 / seen_n as f64 - w_med;
+    contrast > 0.0 && removed as f64 / comp.len() as f64 >= ratio as f64 * contrast
 }
 
 /// The edge ratio an object of contrast `c` (grey levels above the water)
