@@ -1097,7 +1097,7 @@ fn seen_in_span(
     let x0 = (sp[0].max(0) as usize).clamp(cols.start, cols.end);
     let x1 = (sp[1].max(0) as usize).clamp(x0, cols.end);
     let px = sv.row(j).get(x0..x1).unwrap_or(&[]);
-    (sum_sumsq(px).0, px.len() as u64)
+    (px.iter().map(|&p| p as u64).sum(), px.len() as u64)
 }
 
 /// Σ (raw − mesh-free) over one run's pixels: the grey levels the mesh

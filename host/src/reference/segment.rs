@@ -901,13 +901,8 @@ fn edge_sharp(
             }
         }
     };
-    let (mut seen, mut seen_n) = (0.0f64, 0usize);
     for &(x, y) in comp {
         let (x, y) = (x as i64, y as i64);
-        if ins[(y * w + x) as usize] {
-            seen += val(x, y);
-            seen_n += 1;
-        }
         // the run through (x, y) starts here / ends here, and is longer than g
         if !in_mask(x - 1, y) && (0..=g).all(|k| in_mask(x + k, y)) {
             sample((x + g, y), (x - 1 - g, y));
@@ -922,11 +917,13 @@ fn edge_sharp(
             sample((x, y + g), (x, y - 1 - g));
         }
     }
-    if n < EDGE_MIN_SAMPLES || seen_n == 0 {
+    let Some(contrast) = contrast_of(comp, ins, at, rw, w_med) else {
+        return true;
+    };
+    if n < EDGE_MIN_SAMPLES {
         return true;
     }
     let step = sum / n as f64;
-    let contrast = seen / seen_n as f64 - w_med;
     let ratio = ratio(contrast);
     contrast <= 0.0 || step >= ratio as f64 * contrast
 }
@@ -948,24 +945,41 @@ fn is_mesh_residue(
     w_med: f64,
     ratio: f32,
 ) -> bool {
-    let mut removed = 0u64;
-    let (mut seen, mut seen_n) = (0u64, 0u64);
+    let Some(contrast) = contrast_of(comp, ins, at, rw, w_med) else {
+        return false;
+    };
+    let removed: u64 = comp
+        .iter()
+        .map(|&(x, y)| {
+            let (fx, fy) = (x + x0, y + y0);
+            let r = raw.get_pixel(fx, fy).0[0] as i64;
+            let f = filtered.get_pixel(fx, fy).0[0] as i64;
+            (r - f).max(0) as u64
+        })
+        .sum();
+    contrast > 0.0 && removed as f64 / comp.len() as f64 >= ratio as f64 * contrast
+}
+
+/// The contrast the edge and mesh-residue tests judge an object by (core:
+/// `local::EdgeSteps::contrast`): the mean of its thresholded values `at`
+/// over its pixels inside the ellipse (`ins`; region box `rw` wide) minus
+/// the water median `w_med`; `None` when no pixel is inside.
+fn contrast_of(
+    comp: &[(u32, u32)],
+    ins: &[bool],
+    at: &dyn Fn(u32) -> u8,
+    rw: u32,
+    w_med: f64,
+) -> Option<f64> {
+    let (mut seen, mut n) = (0u64, 0u64);
     for &(x, y) in comp {
-        let (fx, fy) = (x + x0, y + y0);
-        let r = raw.get_pixel(fx, fy).0[0] as i64;
-        let f = filtered.get_pixel(fx, fy).0[0] as i64;
-        removed += (r - f).max(0) as u64;
         let i = y * rw + x;
         if ins[i as usize] {
             seen += at(i) as u64;
-            seen_n += 1;
+            n += 1;
         }
     }
-    if comp.is_empty() || seen_n == 0 {
-        return false;
-    }
-    let contrast = seen as f64 / seen_n as f64 - w_med;
-    contrast > 0.0 && removed as f64 / comp.len() as f64 >= ratio as f64 * contrast
+    (n > 0).then(|| seen as f64 / n as f64 - w_med)
 }
 
 /// The edge ratio an object of contrast `c` (grey levels above the water)
