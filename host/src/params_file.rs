@@ -101,6 +101,9 @@ pub struct TrackOverrides {
     /// [`TrackConfig::fold_shared`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fold_shared: Option<bool>,
+    /// [`TrackConfig::newborn_reverse_cost`] (`inf` turns it off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub newborn_reverse_cost: Option<f32>,
 }
 
 impl TrackOverrides {
@@ -129,6 +132,7 @@ impl TrackOverrides {
         set(self.cut_aware_motion, &mut cfg.cut_aware_motion);
         set(self.axis_direction, &mut cfg.axis_direction);
         set(self.fold_shared, &mut cfg.fold_shared);
+        set(self.newborn_reverse_cost, &mut cfg.newborn_reverse_cost);
     }
 }
 
@@ -341,7 +345,7 @@ mod tests {
     #[test]
     fn track_table_overrides_the_tracker_and_names_bad_keys() {
         let (_t, p) =
-            write("p_low = 0.9\n[track]\nmax_lost = 0\nmiss_cost = 30\nfold_shared = false\n");
+            write("p_low = 0.9\n[track]\nmax_lost = 0\nmiss_cost = 30\nfold_shared = false\nnewborn_reverse_cost = inf\n");
         let f = load_params(&p, 2048).unwrap();
         assert_eq!(f.params.p_low, 0.9);
         let mut cfg = TrackConfig::for_frame(2048, 2048);
@@ -350,6 +354,7 @@ mod tests {
             max_lost: 0,
             miss_cost: 30.0,
             fold_shared: false,
+            newborn_reverse_cost: f32::INFINITY,
             ..TrackConfig::for_frame(2048, 2048)
         };
         assert_eq!(cfg, want);
@@ -360,6 +365,14 @@ mod tests {
                 ("[track]\nmax_lost = 15\n", "track.max_lost"),
                 ("[track]\nmiss_cost = 0\n", "track.miss_cost"),
                 ("[track]\nfold_shared = 1\n", "track.fold_shared"),
+                (
+                    "[track]\nnewborn_reverse_cost = -1\n",
+                    "track.newborn_reverse_cost",
+                ),
+                (
+                    "[track]\nnewborn_reverse_cost = nan\n",
+                    "track.newborn_reverse_cost",
+                ),
                 ("track = 3\n", "track"),
             ],
             2048,

@@ -50,7 +50,8 @@ fn success(hauls: &[TruthObs], assoc: Assoc, cues: Cues) -> (u64, u64) {
 /// [cap share σ_a σ_m σ_h σ_d lost_gate swap_passes area_robust hist_robust]"
 /// (defaults: `24 48 250 350 32 2 1 inf 24 0.25 0.5 1 0.04 6 4 inf inf`);
 /// FISHTRACK_RULES="fold=0 …" switches the round-5 rules
-/// (`fold_shared`) and sets `depth_robust=C` (session 7).
+/// (`fold_shared`) and sets `depth_robust=C` (session 7) and
+/// `reverse=C` (`newborn_reverse_cost`, session 39; `inf` = off).
 fn tweak(cfg: &mut TrackConfig) {
     if let Ok(v) = std::env::var("FISHTRACK_RULES") {
         for kv in v.split_whitespace() {
@@ -61,6 +62,7 @@ fn tweak(cfg: &mut TrackConfig) {
                 "depth_robust" => cfg.depth_robust = x.parse().unwrap(),
                 "cut_aware" => cfg.cut_aware_motion = on,
                 "axis" => cfg.axis_direction = on,
+                "reverse" => cfg.newborn_reverse_cost = x.parse().unwrap(),
                 _ => panic!("FISHTRACK_RULES: unknown rule {k}"),
             }
         }

@@ -9,6 +9,9 @@
 //!   or the uncut box sides' for a view the border cuts, see below). A
 //!   node whose velocity is still unknown (a target's first frame) is projected with the fleet's typical
 //!   velocity `v_init` and uses the wider σ_v0 instead (see `sigma`);
+//!   the tracker also tries it projected by `−v_init`, at a cost
+//!   (`TrackConfig::newborn_reverse_cost`: a fish may swim against the
+//!   school);
 //! - area      z_a = (ΔA)² / σ_a². Areas are first normalised to a common
 //!   range, `A·(z / Z_REF)²` (z = stereo depth, `TrackConfig::z_ref_mm`,
 //!   default 2000 mm, the middle of the Cam-trawl's 1.2–3 m range), when both

@@ -683,6 +683,52 @@ fn a_newborn_is_projected_across_the_crossing_width_not_the_frame() {
 }
 
 #[test]
+fn a_newborn_swimming_against_the_school_keeps_its_id() {
+    // At 2.5 fps (crossing width twice the view's) a newborn is projected
+    // by v_init ≈ (−952, 0). A fish in view when the haul starts swims +x
+    // at 900 px/frame: the forward projection misses it by ~1 850 px (z_v
+    // ≈ 28 per camera, over the gate), the reversed one by ~50 px. With the
+    // reversed projection it keeps one id; without it (cost ∞) it is born
+    // again.
+    let p = Params::for_frame(W);
+    let cfg = |reverse: f32, crossing: u32| TrackConfig {
+        crossing_width: crossing,
+        newborn_reverse_cost: reverse,
+        ..TrackConfig::for_frame(W, W)
+    };
+    let v = default_v_init(&p, 2 * W);
+    assert!(v[0] < -900.0 && v[1].abs() < 1.0, "{v:?}");
+    let frames = std::vec![
+        std::vec![fish(300.0, 1000.0, 300.0, 9, 1800.0, 0)],
+        std::vec![fish(1200.0, 1010.0, 300.0, 9, 1800.0, 0)],
+    ];
+    for (reverse, same) in [(NEWBORN_REVERSE_COST, true), (f32::INFINITY, false)] {
+        let log = run_cfg(&frames, cfg(reverse, 2 * W));
+        let (a, b) = (log.ids_of(0, 0), log.ids_of(1, 0));
+        assert_eq!((a.len(), b.len()), (1, 1), "{:?}", log.frames);
+        assert_eq!(a == b, same, "reverse cost {reverse}: {:?}", log.frames);
+    }
+    // The reversed projection pays its cost: between a look-alike where
+    // v_init (5 fps, ≈ (−476, 0)) puts it and one as far the other way
+    // (listed first), the forward one wins.
+    let v = default_v_init(&p, W);
+    let frames = std::vec![
+        std::vec![fish(1000.0, 1000.0, 300.0, 9, 1800.0, 0)],
+        std::vec![
+            fish(1000.0 - v[0], 1000.0, 300.0, 9, 1800.0, 0),
+            fish(1000.0 + v[0], 1000.0, 300.0, 9, 1800.0, 1),
+        ],
+    ];
+    let log = run_cfg(&frames, cfg(NEWBORN_REVERSE_COST, W));
+    let id = log.ids_of(0, 0);
+    assert_eq!(id.len(), 1, "{:?}", log.frames);
+    assert_eq!(log.ids_of(1, 1), id, "{:?}", log.frames);
+    assert!(cfg(-1.0, W).validate(16).is_err());
+    assert!(cfg(f32::NAN, W).validate(16).is_err());
+    assert!(cfg(0.0, W).validate(16).is_ok());
+}
+
+#[test]
 fn a_fish_leaving_cut_by_the_border_is_not_a_new_fish() {
     // A 400-px fish swims out through the left border at 500 px/frame: its
     // prediction for frame 3 (x = 60) is inside the exit margin, so its

@@ -278,6 +278,8 @@ struct Costs {
     depth_c: f64,
     /// `TrackConfig::cut_aware_motion`.
     cut_aware: bool,
+    /// `TrackConfig::newborn_reverse_cost` (∞ = forward projection only).
+    reverse: f64,
 }
 
 struct Feat {
@@ -456,10 +458,29 @@ impl Outline {
     }
 }
 
-/// Stereo edge: (cost, left features, right features).
+/// Stereo edge: (cost, left features, right features). A target's first
+/// transition, seen where it was (not lost), also tries the motion
+/// projection reversed, `x − v_init`, at `k.reverse` more; the cheaper
+/// counts (core: `TrackConfig::newborn_reverse_cost`).
 fn edge(p: &State, c: &Cand, k: &Costs) -> (f64, Feat, Option<Feat>) {
+    if p.vel_known {
+        return edge_along(p, c, k, p.vel);
+    }
+    let fwd = edge_along(p, c, k, k.v_init);
+    if p.lost != 0 || !k.reverse.is_finite() {
+        return fwd;
+    }
+    let back = edge_along(p, c, k, [-k.v_init[0], -k.v_init[1]]);
+    if back.0 + k.reverse < fwd.0 {
+        (back.0 + k.reverse, back.1, back.2)
+    } else {
+        fwd
+    }
+}
+
+/// [`edge`] with the motion projection `x + v`.
+fn edge_along(p: &State, c: &Cand, k: &Costs, v: [f64; 2]) -> (f64, Feat, Option<Feat>) {
     let first = !p.vel_known;
-    let v = if first { k.v_init } else { p.vel };
     let d = (p.depth, c.depth);
     // Direction reference: the target's own velocity; in its first frame
     // the sign-free body axis of the node's view, else of the candidate's,
@@ -685,6 +706,7 @@ pub fn run_traced(
             hist_c: cfg.hist_robust as f64,
             depth_c: cfg.depth_robust as f64,
             cut_aware: cfg.cut_aware_motion,
+            reverse: cfg.newborn_reverse_cost as f64,
         };
         let mut taken = vec![false; obs.len()];
 
