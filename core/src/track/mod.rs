@@ -294,8 +294,9 @@ pub struct TrackConfig {
     /// ones did), so the fish was born again every frame. The first
     /// transition's cost is the lesser of the two projections', the
     /// reversed one plus this cost; a newborn lost on its first transition
-    /// is projected forward only. Default [`NEWBORN_REVERSE_COST`]; ∞ = one
-    /// projection, as the paper.
+    /// is projected forward only. Viterbi and MC (the matching cost); NN
+    /// keeps the paper's one prediction. Default [`NEWBORN_REVERSE_COST`];
+    /// ∞ = one projection, as the paper.
     pub newborn_reverse_cost: f32,
 }
 
@@ -911,7 +912,13 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
                 .v_init_or(min, default_v_init(params, self.cfg.crossing_width)),
             z_ref: self.cfg.z_ref_mm,
             cut_aware: self.cfg.cut_aware_motion,
-            reverse_cost: self.cfg.newborn_reverse_cost,
+            // NN, the paper's baseline, takes the nearest observation to
+            // the one prediction x + v
+            reverse_cost: if params.tracker == Association::Nn {
+                f32::INFINITY
+            } else {
+                self.cfg.newborn_reverse_cost
+            },
             robust: Robust {
                 cap: self.cfg.cue_cap,
                 area: self.cfg.area_robust,

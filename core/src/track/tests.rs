@@ -708,6 +708,10 @@ fn a_newborn_swimming_against_the_school_keeps_its_id() {
         assert_eq!((a.len(), b.len()), (1, 1), "{:?}", log.frames);
         assert_eq!(a == b, same, "reverse cost {reverse}: {:?}", log.frames);
     }
+    // NN, the paper's baseline, keeps its one prediction x + v_init.
+    let (log, _) = run_assoc_cfg(&frames, Assoc::Nn, cfg(NEWBORN_REVERSE_COST, 2 * W));
+    let (a, b) = (log.ids_of(0, 0), log.ids_of(1, 0));
+    assert!(a.len() == 1 && b.len() == 1 && a != b, "{:?}", log.frames);
     // The reversed projection pays its cost: between a look-alike where
     // v_init (5 fps, ≈ (−476, 0)) puts it and one as far the other way
     // (listed first), the forward one wins.

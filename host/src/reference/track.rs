@@ -706,7 +706,12 @@ pub fn run_traced(
             hist_c: cfg.hist_robust as f64,
             depth_c: cfg.depth_robust as f64,
             cut_aware: cfg.cut_aware_motion,
-            reverse: cfg.newborn_reverse_cost as f64,
+            // NN keeps the one prediction x + v
+            reverse: if p.tracker == Assoc::Nn {
+                f64::INFINITY
+            } else {
+                cfg.newborn_reverse_cost as f64
+            },
         };
         let mut taken = vec![false; obs.len()];
 
