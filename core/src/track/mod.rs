@@ -628,7 +628,9 @@ fn edge(p: &NodeState, c: &Cand, x: &Ctx) -> Edge {
         return edge_with(p, c, x, p.vel);
     }
     let e = edge_with(p, c, x, x.v_init);
-    if p.lost != 0 || !x.reverse_cost.is_finite() {
+    // every cost term is ≥ 0: a forward edge at most `reverse_cost` cannot
+    // lose, and needs no second evaluation
+    if p.lost != 0 || e.cost <= x.reverse_cost || !x.reverse_cost.is_finite() {
         return e;
     }
     let r = edge_with(p, c, x, [-x.v_init[0], -x.v_init[1]]);
