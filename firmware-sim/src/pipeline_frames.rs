@@ -67,7 +67,7 @@ fn fish_of(e: &PipelineEvent, out: &mut Vec<FishClosed>) {
         ..
     } = *e
     {
-        if reason != CloseReason::Duplicate {
+        if !matches!(reason, CloseReason::Duplicate | CloseReason::Unconfirmed) {
             out.push(FishClosed {
                 track_id: track,
                 first_frame,

@@ -104,6 +104,12 @@ pub struct TrackOverrides {
     /// [`TrackConfig::newborn_reverse_cost`] (`inf` turns it off).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub newborn_reverse_cost: Option<f32>,
+    /// [`TrackConfig::confirm_births`] (0 = the paper's birth rule).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub confirm_births: Option<u8>,
+    /// [`TrackConfig::confirm_min_step`], pixels per frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub confirm_min_step: Option<f32>,
 }
 
 impl TrackOverrides {
@@ -133,6 +139,8 @@ impl TrackOverrides {
         set(self.axis_direction, &mut cfg.axis_direction);
         set(self.fold_shared, &mut cfg.fold_shared);
         set(self.newborn_reverse_cost, &mut cfg.newborn_reverse_cost);
+        set(self.confirm_births, &mut cfg.confirm_births);
+        set(self.confirm_min_step, &mut cfg.confirm_min_step);
     }
 }
 
@@ -345,7 +353,7 @@ mod tests {
     #[test]
     fn track_table_overrides_the_tracker_and_names_bad_keys() {
         let (_t, p) =
-            write("p_low = 0.9\n[track]\nmax_lost = 0\nmiss_cost = 30\nfold_shared = false\nnewborn_reverse_cost = inf\n");
+            write("p_low = 0.9\n[track]\nmax_lost = 0\nmiss_cost = 30\nfold_shared = false\nnewborn_reverse_cost = inf\nconfirm_births = 0\n");
         let f = load_params(&p, 2048).unwrap();
         assert_eq!(f.params.p_low, 0.9);
         let mut cfg = TrackConfig::for_frame(2048, 2048);
@@ -355,6 +363,7 @@ mod tests {
             miss_cost: 30.0,
             fold_shared: false,
             newborn_reverse_cost: f32::INFINITY,
+            confirm_births: 0,
             ..TrackConfig::for_frame(2048, 2048)
         };
         assert_eq!(cfg, want);
@@ -373,6 +382,9 @@ mod tests {
                     "[track]\nnewborn_reverse_cost = nan\n",
                     "track.newborn_reverse_cost",
                 ),
+                ("[track]\nconfirm_births = -1\n", "track.confirm_births"),
+                ("[track]\nconfirm_births = 300\n", "track.confirm_births"),
+                ("[track]\nconfirm_min_step = -1\n", "track.confirm_min_step"),
                 ("track = 3\n", "track"),
             ],
             2048,

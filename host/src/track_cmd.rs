@@ -644,7 +644,7 @@ fn write_outputs(
                 ..
             } => {
                 log::debug!("track {track} closed ({reason:?}): frames {first_frame}–{last_frame}, {frames} observed");
-                if reason == CloseReason::Duplicate {
+                if matches!(reason, CloseReason::Duplicate | CloseReason::Unconfirmed) {
                     duplicates.insert(track);
                     continue;
                 }

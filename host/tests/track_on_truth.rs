@@ -51,7 +51,8 @@ fn success(hauls: &[TruthObs], assoc: Assoc, cues: Cues) -> (u64, u64) {
 /// (defaults: `24 48 250 350 32 2 1 inf 24 0.25 0.5 1 0.04 6 4 inf inf`);
 /// FISHTRACK_RULES="fold=0 …" switches the round-5 rules
 /// (`fold_shared`) and sets `depth_robust=C` (session 7) and
-/// `reverse=C` (`newborn_reverse_cost`, session 39; `inf` = off).
+/// `reverse=C` (`newborn_reverse_cost`, session 39; `inf` = off) and
+/// `confirm=N` (`confirm_births`, session 40; 0 = off).
 fn tweak(cfg: &mut TrackConfig) {
     if let Ok(v) = std::env::var("FISHTRACK_RULES") {
         for kv in v.split_whitespace() {
@@ -63,6 +64,7 @@ fn tweak(cfg: &mut TrackConfig) {
                 "cut_aware" => cfg.cut_aware_motion = on,
                 "axis" => cfg.axis_direction = on,
                 "reverse" => cfg.newborn_reverse_cost = x.parse().unwrap(),
+                "confirm" => cfg.confirm_births = x.parse().unwrap(),
                 _ => panic!("FISHTRACK_RULES: unknown rule {k}"),
             }
         }

@@ -875,3 +875,81 @@ fn a_newborn_moves_along_its_body_axis() {
         assert_eq!(log.ids_of(2, want), id, "{why}");
     }
 }
+
+#[test]
+fn a_fish_first_seen_small_mid_view_is_counted_once_it_is_confirmed() {
+    // The segmentation missed this small fish while it entered: it is
+    // first seen mid-view, smaller than `birth_area_factor` · θ_A^L, where
+    // the paper's birth rule takes it for a false alarm. Frame 0 holds
+    // nothing (in a haul's first frame every observation is born).
+    let p = Params::for_frame(W);
+    let small = |x: f32, y: f32| fish(x, y, 140.0, 6, 2000.0, 3);
+    assert!(
+        (small(0.0, 0.0).left.area as f32) < 2.0 * p.area_min as f32,
+        "the test fish must be small"
+    );
+    let cfg = |confirm: u8, min_step: f32| TrackConfig {
+        confirm_births: confirm,
+        confirm_min_step: min_step,
+        ..TrackConfig::for_frame(W, W)
+    };
+    let swims = |n: usize| -> Vec<Vec<Observation>> {
+        let mut frames = std::vec![Vec::new()];
+        for t in 0..n {
+            frames.push(std::vec![small(
+                1500.0 - 400.0 * t as f32,
+                1000.0 + 10.0 * t as f32
+            )]);
+        }
+        frames.push(Vec::new());
+        frames.push(Vec::new());
+        frames
+    };
+    let ids = |log: &Log, n: usize| -> Vec<Vec<u32>> {
+        (1..=n as u32).map(|f| log.ids_of(f, 0)).collect()
+    };
+    // Seen in 3 frames: one track holding all three (default), none by the
+    // paper's rule.
+    let frames = swims(3);
+    let def = TrackConfig::for_frame(W, W);
+    for assoc in [Assoc::Viterbi, Assoc::Mc, Assoc::Nn] {
+        let (log, _) = run_assoc_cfg(&frames, assoc, def);
+        let got = ids(&log, 3);
+        assert!(
+            got.iter().all(|v| v.len() == 1 && *v == got[0]),
+            "{assoc:?}: {:?}",
+            log.frames
+        );
+        let (log, _) = run_assoc_cfg(&frames, assoc, cfg(0, def.confirm_min_step));
+        assert!(log.frames.is_empty(), "{assoc:?}: {:?}", log.frames);
+    }
+    // Seen in 2 frames: not confirmed at 3 observations (closed as
+    // unconfirmed, nothing reported), confirmed at 2.
+    let frames = swims(2);
+    let log = run_cfg(&frames, def);
+    assert!(log.frames.is_empty(), "{:?}", log.frames);
+    assert!(
+        log.closed.iter().all(|c| c.1 == CloseReason::Unconfirmed),
+        "{:?}",
+        log.closed
+    );
+    let log = run_cfg(&frames, cfg(2, def.confirm_min_step));
+    assert_eq!(ids(&log, 2).concat().len(), 2, "{:?}", log.frames);
+    // A speck that stays put (a spot on the window, slow debris) for 5
+    // frames is no fish: refused by the motion test, kept without it.
+    let mut frames = std::vec![Vec::new()];
+    for t in 0..5 {
+        frames.push(std::vec![small(
+            1000.0 + 9.0 * t as f32,
+            1000.0 + 3.0 * t as f32
+        )]);
+    }
+    frames.push(Vec::new());
+    frames.push(Vec::new());
+    let log = run_cfg(&frames, def);
+    assert!(log.frames.is_empty(), "{:?}", log.frames);
+    let log = run_cfg(&frames, cfg(3, 0.0));
+    assert_eq!(ids(&log, 5).concat().len(), 5, "{:?}", log.closed);
+    assert!(cfg(3, -1.0).validate(16).is_err());
+    assert!(cfg(3, f32::NAN).validate(16).is_err());
+}

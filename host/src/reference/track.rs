@@ -11,7 +11,7 @@
 //! path with pruning at depth D; the joint selection of each frame's best
 //! nodes (greedy one-to-one on C_i + c_ij − min C, refined by pair
 //! exchanges on the total, `swap_passes`) and the share cost;
-//! births (border margin or large area, none next to a lost target's
+//! births (border margin or large area — else tentative, `confirm_births` — none next to a lost target's
 //! prediction) and deaths (exit margin, `max_lost`); the newborn velocity
 //! (median displacement, else v_ref · W / 4.3); greedy MC/NN; capacities
 //! T, D, K, N; displacements between views the border cuts on one side of
@@ -208,6 +208,8 @@ struct State {
 struct Node {
     obs: Option<usize>,
     pred: usize,
+    /// Left position (the confirmation of tentative targets).
+    pos: [f64; 2],
 }
 
 struct Target {
@@ -224,6 +226,12 @@ struct Target {
     exit: bool,
     /// Committed path: (frame, observation).
     path: Vec<(u32, Option<usize>)>,
+    /// Born where the paper's rule rejects a false alarm (mid-view, small):
+    /// reported only if it closes with `confirm_births` observations,
+    /// `confirm_min_step` px per frame from where it was born.
+    tentative: bool,
+    /// (frame, left position) of the observation it was born on.
+    born: (u32, [f64; 2]),
 }
 
 /// Recently closed tracks' observations, as the core's ring
@@ -848,6 +856,7 @@ pub fn run_traced(
                     Node {
                         obs: Some(c.obs),
                         pred: pi,
+                        pos: c.left.pos,
                     },
                 )
             };
@@ -860,11 +869,13 @@ pub fn run_traced(
                     *r = moved(r, v);
                 }
                 s.lost = pst.lost + 1;
+                let pos = s.left.pos;
                 (
                     s,
                     Node {
                         obs: None,
                         pred: pi,
+                        pos,
                     },
                 )
             };
@@ -1003,7 +1014,13 @@ pub fn run_traced(
             }
         }
         let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
-        resolve_closes(&mut targets, fold, &mut recent, &mut out);
+        resolve_closes(
+            &mut targets,
+            fold,
+            (cfg.confirm_births as u32, cfg.confirm_min_step as f64),
+            &mut recent,
+            &mut out,
+        );
 
         // Births.
         let big = cfg.birth_area_factor as f64 * p.area_min as f64;
@@ -1049,7 +1066,10 @@ pub fn run_traced(
                 lo.iter().chain(&hi).any(|&c| c)
             };
             // In the first frame every fish is already inside the view.
-            if fi > 0 && !near && c.area < big {
+            // Elsewhere a small one is a false alarm (the paper), or a
+            // tentative target (`confirm_births`).
+            let tentative = fi > 0 && !near && c.area < big;
+            if tentative && cfg.confirm_births == 0 {
                 continue;
             }
             if targets.len() >= cap.targets {
@@ -1063,6 +1083,7 @@ pub fn run_traced(
                     vec![Node {
                         obs: Some(c.obs),
                         pred: 0,
+                        pos: c.left.pos,
                     }],
                 )],
                 front: vec![State {
@@ -1079,6 +1100,8 @@ pub fn run_traced(
                 pending: false,
                 exit: false,
                 path: Vec::new(),
+                tentative,
+                born: (frame, c.left.pos),
             });
             next_id += 1;
         }
@@ -1087,7 +1110,13 @@ pub fn run_traced(
         t.pending = true;
     }
     let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
-    resolve_closes(&mut targets, fold, &mut recent, &mut out);
+    resolve_closes(
+        &mut targets,
+        fold,
+        (cfg.confirm_births as u32, cfg.confirm_min_step as f64),
+        &mut recent,
+        &mut out,
+    );
     Traced {
         assignments: out,
         first_near_tie,
@@ -1101,6 +1130,7 @@ pub fn run_traced(
 fn resolve_closes(
     targets: &mut [Target],
     fold: bool,
+    confirm: (u32, f64),
     recent: &mut Recent,
     out: &mut Vec<Assignment>,
 ) {
@@ -1110,6 +1140,12 @@ fn resolve_closes(
         }
         targets[i].pending = false;
         if fold && is_shared(targets, i, recent) {
+            targets[i].closed = true;
+            targets[i].dup = true;
+            continue;
+        }
+        // a tentative target too short to confirm: nothing output
+        if targets[i].tentative && !confirmed(&targets[i], confirm) {
             targets[i].closed = true;
             targets[i].dup = true;
             continue;
@@ -1222,6 +1258,28 @@ fn last_two(t: &Target) -> Option<(usize, usize)> {
     }
 }
 
+/// A tentative target has `need` observations on its path and moved at
+/// least `min_step` px per frame from its birth to its last observation
+/// (positions in whole pixels, as the core's nodes).
+fn confirmed(t: &Target, (need, min_step): (u32, f64)) -> bool {
+    if evidence(t) < need {
+        return false;
+    }
+    let path = best_path(t);
+    let Some((frame, pos)) = (0..t.stages.len()).rev().find_map(|s| {
+        let n = &t.stages[s].1[path[s]];
+        n.obs.map(|_| (t.stages[s].0, n.pos))
+    }) else {
+        return false;
+    };
+    let frames = frame.saturating_sub(t.born.0);
+    let (dx, dy) = (
+        pos[0].round() - t.born.1[0].round(),
+        pos[1].round() - t.born.1[1].round(),
+    );
+    frames > 0 && dx * dx + dy * dy >= (min_step * frames as f64).powi(2)
+}
+
 fn evidence(t: &Target) -> u32 {
     let path = best_path(t);
     t.hits
@@ -1254,6 +1312,7 @@ fn commit_oldest(t: &mut Target, out: &mut Vec<Assignment>) {
                 kept.push(Node {
                     obs: n.obs,
                     pred: if si == 0 { 0 } else { np },
+                    pos: n.pos,
                 });
             }
         }
