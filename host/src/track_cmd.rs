@@ -565,6 +565,10 @@ struct Written {
     detections: usize,
     stereo_rows: usize,
     duplicates: usize,
+    /// Tentative tracks never confirmed (`TrackConfig::confirm_births`).
+    unconfirmed: usize,
+    /// Tracks whose every observed box in the raw view is under θ_A^L.
+    slivers: usize,
     /// Counted fish whose measured frames disagree with no majority
     /// (length withheld, `LengthConfig::track_agreement`).
     inconsistent: usize,
@@ -582,6 +586,7 @@ fn write_outputs(
     let mut tracks = Vec::new();
     let mut fish = Vec::new();
     let mut duplicates = BTreeSet::new();
+    let mut unconfirmed = BTreeSet::new();
     let mut inconsistent = BTreeSet::new();
     // FISHTRACK_STEREO_DIAG=1: every pair's length measurement in
     // OUT/stereo_diag.csv (analysis aid, not part of the output contract)
@@ -644,8 +649,12 @@ fn write_outputs(
                 ..
             } => {
                 log::debug!("track {track} closed ({reason:?}): frames {first_frame}–{last_frame}, {frames} observed");
-                if matches!(reason, CloseReason::Duplicate | CloseReason::Unconfirmed) {
+                if reason == CloseReason::Duplicate {
                     duplicates.insert(track);
+                    continue;
+                }
+                if reason == CloseReason::Unconfirmed {
+                    unconfirmed.insert(track);
                     continue;
                 }
                 if length.inconsistent {
@@ -667,6 +676,14 @@ fn write_outputs(
     // rows wholly in the fill (alpha > 0) are not in the raw view; a track
     // never in it is no fish
     tracks.retain(|r| in_raw_view(&r.bbox));
+    // a fish is an object of at least θ_A^L pixels (eq. 4, `area_min` at
+    // the raw frame's scale): a track whose every observed box inside the
+    // raw view is smaller (a sliver at the raw edge, the rest of its
+    // object in the fill, or a fragment of a fish leaving) never showed
+    // one, and is not counted (seeds 1–30 / 31–60: 5 / 3 such tracks, all
+    // one frame long, none a fish)
+    let slivers = sliver_tracks(&tracks, f64::from(setup.params.area_min));
+    tracks.retain(|r| !slivers.contains(&r.id));
     // a fish needs an observation in the raw view; its first/last observed
     // frame and its frame count (observed or predicted) come from the rows
     // still there (equal to the core's when no row was dropped)
@@ -711,12 +728,30 @@ fn write_outputs(
         detections: dets.len(),
         stereo_rows: stereo.len(),
         duplicates: duplicates.len(),
+        unconfirmed: unconfirmed.len(),
+        slivers: slivers.len(),
         inconsistent: fish
             .iter()
             .filter(|f| inconsistent.contains(&f.track_id))
             .count(),
         fish,
     })
+}
+
+/// Tracks whose every observed row (`conf` 1; predicted rows are 0.5) has
+/// a box of fewer than `amin` pixels: no frame of theirs can hold an
+/// object of θ_A^L pixels, eq. (4).
+fn sliver_tracks(rows: &[TrackRow], amin: f64) -> BTreeSet<u32> {
+    let mut biggest: BTreeMap<u32, f64> = BTreeMap::new();
+    for r in rows.iter().filter(|r| r.conf >= 1.0) {
+        let e = biggest.entry(r.id).or_insert(0.0);
+        *e = e.max(r.bbox[2] * r.bbox[3]);
+    }
+    biggest
+        .into_iter()
+        .filter(|&(_, a)| a < amin)
+        .map(|(id, _)| id)
+        .collect()
 }
 
 /// One `stereo_diag.csv` line: frame, raw left and right boxes, then the
@@ -862,6 +897,8 @@ fn write_summary(
             "tracks_born": t.targets_born,
             "tracks_closed": t.tracks_closed,
             "duplicate_tracks": w.duplicates,
+            "unconfirmed_tracks": w.unconfirmed,
+            "sliver_tracks": w.slivers,
             "fish_length_inconsistent": w.inconsistent,
         },
         "dropped": {
@@ -916,4 +953,39 @@ pub fn run(hauls: &[PathBuf], out: &Path, opts: &TrackOptions) -> Result<()> {
         parse_tracker(t)?;
     }
     crate::survey::run(hauls, out, opts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(id: u32, frame: u32, w: f64, h: f64, conf: f64) -> TrackRow {
+        TrackRow {
+            frame,
+            id,
+            bbox: [0.0, 100.0, w, h],
+            conf,
+            xyz: None,
+        }
+    }
+
+    #[test]
+    fn a_track_never_showing_a_fish_sized_box_is_a_sliver() {
+        let amin = 2000.0;
+        let rows = [
+            // a sliver at the raw edge, seen once
+            row(1, 3, 37.0, 40.0, 1.0),
+            // small when it entered, fish-sized later: a fish
+            row(2, 3, 30.0, 60.0, 1.0),
+            row(2, 4, 200.0, 60.0, 1.0),
+            // fish-sized only where predicted (conf 0.5): never observed so
+            row(3, 5, 40.0, 40.0, 1.0),
+            row(3, 6, 300.0, 80.0, 0.5),
+            // exactly θ_A^L: may hold a fish
+            row(4, 7, 40.0, 50.0, 1.0),
+        ];
+        let s = sliver_tracks(&rows, amin);
+        assert_eq!(s.into_iter().collect::<Vec<_>>(), vec![1, 3]);
+        assert!(sliver_tracks(&rows, 1.0).is_empty());
+    }
 }
