@@ -53,9 +53,11 @@ impl PipelineFrames {
     }
 }
 
-/// Every non-duplicate closed track is a fish. (`fishtrack track`, which
-/// knows the raw view, also drops a track whose boxes all lie in the fill
-/// of an `alpha > 0` rectification; the device cannot tell, so on a haul
+/// Every closed track that is neither a duplicate nor an unconfirmed
+/// tentative target is a fish. (`fishtrack track`, which knows the raw
+/// view, also drops a track whose boxes all lie in the fill of an
+/// `alpha > 0` rectification, and one whose every observed box inside the
+/// raw view is smaller than θ_A^L; the device cannot tell, so on a haul
 /// with such a track the two counts differ by it.)
 fn fish_of(e: &PipelineEvent, out: &mut Vec<FishClosed>) {
     if let PipelineEvent::TrackClosed {
