@@ -705,7 +705,7 @@ fn write_outputs(
         }
         _ => false,
     });
-    tracks.retain(|r| !duplicates.contains(&r.id));
+    tracks.retain(|r| !duplicates.contains(&r.id) && !unconfirmed.contains(&r.id));
     tracks.sort_by_key(|r| (r.frame, r.id));
     fish.sort_by_key(|f| f.track_id);
     let names: Vec<String> = setup.haul.frames.iter().map(|f| f.name.clone()).collect();

@@ -850,3 +850,76 @@ fn fold_shared_removes_only_duplicated_tracks() {
         "no track folded: the test does not exercise the rule"
     );
 }
+
+/// Tentative targets (`TrackConfig::confirm_births`, session 40): a slow
+/// speck mid-view for longer than the trellis is deep (so its oldest
+/// stages are committed while it lives) and a small fish first seen
+/// mid-view. Core and reference report the same frames: none of the
+/// speck, the fish's four in one track.
+#[test]
+fn core_and_reference_agree_on_tentative_targets() {
+    let small = |x: f32, y: f32, bin: usize| -> Observation {
+        let (len, h) = (140.0f32, 35.0f32);
+        let mut hist = [0u32; 16];
+        hist[bin] = 60;
+        hist[bin + 1] = 25;
+        let left = CameraView {
+            cx: x,
+            cy: y,
+            bbox: Roi::new(
+                (x - len / 2.0) as u32,
+                (y - h / 2.0) as u32,
+                len as u32,
+                h as u32,
+            ),
+            area: (len * h * 0.7) as u32,
+            hist,
+            ..Default::default()
+        };
+        let mut right = left;
+        right.cx -= 300.0;
+        right.bbox.x -= 300;
+        Observation {
+            left,
+            right: Some(right),
+            depth_mm: Some(2000.0),
+            pair: 1,
+        }
+    };
+    let mut frames = vec![Vec::new()];
+    for t in 0..40 {
+        let mut v = vec![small(1000.0 + 2.0 * t as f32, 700.0, 3)];
+        if (5..9).contains(&t) {
+            v.push(small(1500.0 - 400.0 * (t - 5) as f32, 1300.0, 9));
+        }
+        frames.push(v);
+    }
+    frames.push(Vec::new());
+    frames.push(Vec::new());
+    let h = Haul {
+        frames,
+        owners: Vec::new(),
+        fish_frames: Vec::new(),
+    };
+    for a in [Assoc::Viterbi, Assoc::Mc, Assoc::Nn] {
+        let core = run_core_full(&h, a);
+        let p = Params {
+            tracker: a,
+            ..Params::for_frame(W)
+        };
+        let r = reference::track::run_traced(
+            &h.frames,
+            &p,
+            &TrackConfig::for_frame(W, W),
+            reference::track::Capacities::DEFAULT,
+        );
+        assert_core_matches_reference(&core, &r, &format!("tentative {a:?}"));
+        assert!(core.iter().all(|x| x.obs != Some(0)), "{a:?}: {core:?}");
+        let fish: Vec<_> = core.iter().filter(|x| x.obs == Some(1)).collect();
+        assert_eq!(fish.len(), 4, "{a:?}: {core:?}");
+        assert!(
+            fish.iter().all(|x| x.track == fish[0].track),
+            "{a:?}: {core:?}"
+        );
+    }
+}

@@ -1166,7 +1166,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         // from a joint one-to-one assignment (see the module docs).
         for (t, row) in self.targets.iter_mut().zip(self.keys.iter_mut()) {
             if t.trellis.len() >= D {
-                commit(t, &mut self.stats, sink);
+                commit(t, &cfg, &mut self.stats, sink);
             }
             for k in row.iter_mut() {
                 *k = f32::INFINITY;
@@ -1286,7 +1286,7 @@ impl<const T: usize, const D: usize, const K: usize, const H: usize, const N: us
         let nn = params.tracker == Association::Nn;
         for (t, row) in self.targets.iter_mut().zip(self.keys.iter_mut()) {
             if t.trellis.len() >= D {
-                commit(t, &mut self.stats, sink);
+                commit(t, &cfg, &mut self.stats, sink);
             }
             for k in row.iter_mut() {
                 *k = f32::INFINITY;
@@ -1677,14 +1677,24 @@ fn record<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>
     sink.event(&TrackEvent::Frame { track: t.id, step });
 }
 
-/// Commits the target's oldest stage.
+/// Commits the target's oldest stage (its trellis is full). A tentative
+/// target ([`TrackConfig::confirm_births`]) that is [`confirmed`] by now
+/// becomes an ordinary one; one that is not drops the stage unreported, so
+/// a target that is never confirmed reports no frame however long it
+/// lives (a speck on the window for the whole haul).
 fn commit<const D: usize, const K: usize, const H: usize, S: EventSink + ?Sized>(
     t: &mut Target<D, K, H>,
+    cfg: &TrackConfig,
     stats: &mut TrackStats,
     sink: &mut S,
 ) {
+    if t.tentative && confirmed(t, cfg.confirm_births, cfg.confirm_min_step) {
+        t.tentative = false;
+    }
     if let Some((frame, node)) = t.trellis.commit_oldest() {
-        record(t, frame, &node, stats, sink);
+        if !t.tentative {
+            record(t, frame, &node, stats, sink);
+        }
     }
 }
 

@@ -950,6 +950,28 @@ fn a_fish_first_seen_small_mid_view_is_counted_once_it_is_confirmed() {
     assert!(log.frames.is_empty(), "{:?}", log.frames);
     let log = run_cfg(&frames, cfg(3, 0.0));
     assert_eq!(ids(&log, 5).concat().len(), 5, "{:?}", log.closed);
+    // Longer than the trellis is deep (its oldest stages are committed
+    // while it lives): still nothing reported, and the track closes as
+    // unconfirmed.
+    let mut frames = std::vec![Vec::new()];
+    for t in 0..40 {
+        frames.push(std::vec![small(1000.0 + 2.0 * t as f32, 1000.0)]);
+    }
+    frames.push(Vec::new());
+    frames.push(Vec::new());
+    let log = run_cfg(&frames, def);
+    assert!(log.frames.is_empty(), "{:?}", log.frames);
+    assert!(!log.closed.is_empty());
+    assert!(
+        log.closed
+            .iter()
+            .all(|c| c.1 == CloseReason::Unconfirmed && c.3.is_empty()),
+        "{:?}",
+        log.closed
+    );
+    // A fish confirmed before its trellis fills reports every frame.
+    let log = run_cfg(&frames, cfg(3, 0.0));
+    assert_eq!(ids(&log, 40).concat().len(), 40, "{:?}", log.closed);
     assert!(cfg(3, -1.0).validate(16).is_err());
     assert!(cfg(3, f32::NAN).validate(16).is_err());
 }

@@ -754,7 +754,19 @@ pub fn run_traced(
 
         for t in targets.iter_mut() {
             if t.stages.len() >= cap.depth {
-                commit_oldest(t, &mut out);
+                // a tentative target reports nothing until it is confirmed
+                let confirm = (cfg.confirm_births as u32, cfg.confirm_min_step as f64);
+                if t.tentative && confirmed(t, confirm) {
+                    t.tentative = false;
+                }
+                if t.tentative {
+                    let (hits, steps) = (t.hits, t.path.len());
+                    commit_oldest(t, &mut Vec::new());
+                    t.hits = hits;
+                    t.path.truncate(steps);
+                } else {
+                    commit_oldest(t, &mut out);
+                }
             }
         }
         // Viterbi selection: a joint one-to-one assignment (greedy, smallest
