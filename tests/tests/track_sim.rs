@@ -878,7 +878,7 @@ fn core_and_reference_agree_on_tentative_targets() {
         };
         let mut right = left;
         right.cx -= 300.0;
-        right.bbox.x -= 300;
+        right.bbox.x = right.bbox.x.saturating_sub(300);
         Observation {
             left,
             right: Some(right),
