@@ -755,8 +755,7 @@ pub fn run_traced(
         for t in targets.iter_mut() {
             if t.stages.len() >= cap.depth {
                 // a tentative target reports nothing until it is confirmed
-                let confirm = (cfg.confirm_births as u32, cfg.confirm_min_step as f64);
-                if t.tentative && confirmed(t, confirm) {
+                if t.tentative && confirmed(t, cfg) {
                     t.tentative = false;
                 }
                 if t.tentative {
@@ -1026,13 +1025,7 @@ pub fn run_traced(
             }
         }
         let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
-        resolve_closes(
-            &mut targets,
-            fold,
-            (cfg.confirm_births as u32, cfg.confirm_min_step as f64),
-            &mut recent,
-            &mut out,
-        );
+        resolve_closes(&mut targets, fold, cfg, &mut recent, &mut out);
 
         // Births.
         let big = cfg.birth_area_factor as f64 * p.area_min as f64;
@@ -1122,13 +1115,7 @@ pub fn run_traced(
         t.pending = true;
     }
     let fold = p.tracker == Assoc::Viterbi && cfg.fold_shared;
-    resolve_closes(
-        &mut targets,
-        fold,
-        (cfg.confirm_births as u32, cfg.confirm_min_step as f64),
-        &mut recent,
-        &mut out,
-    );
+    resolve_closes(&mut targets, fold, cfg, &mut recent, &mut out);
     Traced {
         assignments: out,
         first_near_tie,
@@ -1142,7 +1129,7 @@ pub fn run_traced(
 fn resolve_closes(
     targets: &mut [Target],
     fold: bool,
-    confirm: (u32, f64),
+    cfg: &TrackConfig,
     recent: &mut Recent,
     out: &mut Vec<Assignment>,
 ) {
@@ -1157,7 +1144,7 @@ fn resolve_closes(
             continue;
         }
         // a tentative target too short to confirm: nothing output
-        if targets[i].tentative && !confirmed(&targets[i], confirm) {
+        if targets[i].tentative && !confirmed(&targets[i], cfg) {
             targets[i].closed = true;
             targets[i].dup = true;
             continue;
@@ -1270,10 +1257,11 @@ fn last_two(t: &Target) -> Option<(usize, usize)> {
     }
 }
 
-/// A tentative target has `need` observations on its path and moved at
-/// least `min_step` px per frame from its birth to its last observation
-/// (positions in whole pixels, as the core's nodes).
-fn confirmed(t: &Target, (need, min_step): (u32, f64)) -> bool {
+/// A tentative target has `confirm_births` observations on its path and
+/// moved at least `confirm_min_step` px per frame from its birth to its
+/// last observation (positions in whole pixels, as the core's nodes).
+fn confirmed(t: &Target, cfg: &TrackConfig) -> bool {
+    let (need, min_step) = (cfg.confirm_births as u32, cfg.confirm_min_step as f64);
     if evidence(t) < need {
         return false;
     }
